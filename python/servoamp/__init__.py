@@ -1,0 +1,3 @@
+"""servoamp host tools."""
+
+__version__ = "0.1.0"

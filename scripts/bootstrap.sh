@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# Install everything servoamp needs, idempotently: Debian packages (with
+# bookworm-backports for QEMU >= 9.1) and a Python virtual environment in
+# .venv with the host tools. Safe to run again; a second run costs seconds.
+#
+#   scripts/bootstrap.sh            # everything (host + emulated board)
+#   SERVOAMP_BOOTSTRAP=host scripts/bootstrap.sh   # host tools only
+set -euo pipefail
+here=$(cd "$(dirname "$0")/.." && pwd)
+cd "$here"
+scope=${SERVOAMP_BOOTSTRAP:-all}
+
+log() { printf '[bootstrap] %s\n' "$*"; }
+sudo_cmd=""
+[ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
+
+# The Debian mirror this machine already uses: read from its own apt
+# configuration so that no host name is ever written into the repository.
+debian_mirror() {
+	local f uri=""
+	for f in /etc/apt/sources.list.d/*.sources; do
+		[ -r "$f" ] || continue
+		uri=$(awk '/^URIs:/ { for (i = 2; i <= NF; i++) if ($i !~ /security/) { print $i; exit } }' "$f")
+		[ -n "$uri" ] && break
+	done
+	if [ -z "$uri" ] && [ -r /etc/apt/sources.list ]; then
+		uri=$(awk '$1 == "deb" && $0 !~ /security/ { for (i = 2; i <= NF; i++) if ($i ~ /^[a-z]+:\/\//) { print $i; exit } }' /etc/apt/sources.list)
+	fi
+	[ -n "$uri" ] || { echo "bootstrap: cannot find the Debian mirror in /etc/apt" >&2; return 1; }
+	printf '%s\n' "${uri%/}"
+}
+
+apt_host=(build-essential gcc make pkg-config python3-venv git
+	gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi)
+apt_board=(gcc-arm-linux-gnueabihf binutils-arm-linux-gnueabihf
+	device-tree-compiler linux-source-6.1 bc bison flex libssl-dev
+	libelf-dev cpio xz-utils kmod python3-minimal)
+
+missing=()
+want=("${apt_host[@]}")
+[ "$scope" = host ] || want+=("${apt_board[@]}")
+for p in "${want[@]}"; do
+	dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p")
+done
+
+need_qemu=0
+if [ "$scope" != host ]; then
+	if ! command -v qemu-system-arm >/dev/null ||
+		! qemu-system-arm --version | awk 'NR==1 { split($4, v, "."); exit !(v[1] > 9 || (v[1] == 9 && v[2] >= 1)) }'; then
+		need_qemu=1
+	fi
+fi
+
+if [ ${#missing[@]} -gt 0 ] || [ $need_qemu -eq 1 ]; then
+	if [ $need_qemu -eq 1 ]; then
+		list=/etc/apt/sources.list.d/servoamp-backports.list
+		if [ ! -f "$list" ]; then
+			mirror=$(debian_mirror)
+			log "adding bookworm-backports from $list"
+			echo "deb $mirror bookworm-backports main" | $sudo_cmd tee "$list" >/dev/null
+		fi
+	fi
+	log "apt-get update"
+	$sudo_cmd apt-get update -qq || log "apt-get update reported errors; continuing"
+	if [ ${#missing[@]} -gt 0 ]; then
+		log "installing: ${missing[*]}"
+		DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+	fi
+	if [ $need_qemu -eq 1 ]; then
+		log "installing qemu-system-arm from bookworm-backports"
+		DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends \
+			-t bookworm-backports qemu-system-arm >/dev/null
+	fi
+fi
+
+# Python: a virtual environment with the host tools, keyed by pyproject.toml.
+venv="$here/.venv"
+stamp="$venv/.servoamp-stamp"
+key=$(cat pyproject.toml | sha256sum | cut -d' ' -f1)
+if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$key" ]; then
+	log "creating Python environment in .venv"
+	python3 -m venv "$venv"
+	"$venv/bin/python" -m pip install -q --upgrade pip >/dev/null
+	"$venv/bin/python" -m pip install -q -e ".[dev]"
+	echo "$key" >"$stamp"
+fi
+log "ready ($scope)"
