@@ -1,0 +1,48 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Linux userspace port for the target (Cortex-A9 / A53 Linux): OCM is an
+ * mmap()ed UIO region, mapped non-cacheable by the kernel, so no cache
+ * maintenance is needed; the barriers must order accesses for the other
+ * core, which on ARM means a full-system DMB (the servo core may sit
+ * outside the inner-shareable domain, e.g. the ZynqMP R5).
+ */
+#ifndef AMP_PORT_IMPL_H
+#define AMP_PORT_IMPL_H
+
+#include <stdint.h>
+#include <time.h>
+
+#define AMP_PORT_LOAD32(p)     __atomic_load_n((p), __ATOMIC_RELAXED)
+#define AMP_PORT_STORE32(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
+/* Semaphore and publication words: sequentially consistent. */
+#define AMP_PORT_LOAD_ACQ(p)     __atomic_load_n((p), __ATOMIC_SEQ_CST)
+#define AMP_PORT_STORE_REL(p, v) __atomic_store_n((p), (v), __ATOMIC_SEQ_CST)
+
+#if defined(__arm__)
+#define AMP_PORT_MB()    __asm__ volatile("dmb sy" ::: "memory")
+#define AMP_PORT_RELAX() __asm__ volatile("yield" ::: "memory")
+#elif defined(__aarch64__)
+#define AMP_PORT_MB()    __asm__ volatile("dmb sy" ::: "memory")
+#define AMP_PORT_RELAX() __asm__ volatile("yield" ::: "memory")
+#else
+#define AMP_PORT_MB()    __atomic_thread_fence(__ATOMIC_SEQ_CST)
+#define AMP_PORT_RELAX() do { } while (0)
+#endif
+
+#if AMP_CFG_OCM_CACHED
+#error "the linux port expects a non-cacheable mapping (UIO maps OCM uncached)"
+#endif
+#define AMP_PORT_CACHE_CLEAN(a, n) ((void)(a), (void)(n))
+#define AMP_PORT_CACHE_INVAL(a, n) ((void)(a), (void)(n))
+
+#define AMP_PORT_TICKS_PER_US 1u
+
+static inline uint32_t amp_port_ticks(void)
+{
+	struct timespec ts;
+
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (uint32_t)((uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u);
+}
+
+#endif /* AMP_PORT_IMPL_H */

@@ -1,0 +1,40 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * POSIX host port: a MAP_SHARED mapping stands in for OCM between two
+ * processes (or threads). C11-style atomics keep the accesses defined and
+ * visible to ThreadSanitizer; ticks are CLOCK_MONOTONIC microseconds.
+ */
+#ifndef AMP_PORT_IMPL_H
+#define AMP_PORT_IMPL_H
+
+#include <stdint.h>
+#include <time.h>
+
+#define AMP_PORT_LOAD32(p)     __atomic_load_n((p), __ATOMIC_RELAXED)
+#define AMP_PORT_STORE32(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
+/* Semaphore and publication words: sequentially consistent. */
+#define AMP_PORT_LOAD_ACQ(p)     __atomic_load_n((p), __ATOMIC_SEQ_CST)
+#define AMP_PORT_STORE_REL(p, v) __atomic_store_n((p), (v), __ATOMIC_SEQ_CST)
+#define AMP_PORT_MB()          __atomic_thread_fence(__ATOMIC_SEQ_CST)
+#define AMP_PORT_CACHE_CLEAN(a, n) ((void)(a), (void)(n))
+#define AMP_PORT_CACHE_INVAL(a, n) ((void)(a), (void)(n))
+
+#if defined(__x86_64__) || defined(__i386__)
+#define AMP_PORT_RELAX() __builtin_ia32_pause()
+#elif defined(__arm__) || defined(__aarch64__)
+#define AMP_PORT_RELAX() __asm__ volatile("yield" ::: "memory")
+#else
+#define AMP_PORT_RELAX() do { } while (0)
+#endif
+
+#define AMP_PORT_TICKS_PER_US 1u
+
+static inline uint32_t amp_port_ticks(void)
+{
+	struct timespec ts;
+
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (uint32_t)((uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u);
+}
+
+#endif /* AMP_PORT_IMPL_H */

@@ -1,0 +1,58 @@
+/* SPDX-License-Identifier: MIT */
+/* amp_internal.h - helpers shared by the two sides of amp_lib. */
+#ifndef AMP_INTERNAL_H
+#define AMP_INTERNAL_H
+
+#include "amp/amp.h"
+
+#define AMP_WD_LIMIT_MAX 1000000u
+
+#define RD(p)    AMP_PORT_LOAD32(p)
+#define WR(p, v) AMP_PORT_STORE32((p), (v))
+#define MB()     AMP_PORT_MB()
+#define RD_ACQ(p)    AMP_PORT_LOAD_ACQ(p)
+#define WR_REL(p, v) AMP_PORT_STORE_REL((p), (v))
+
+/* Word-wise copies between local memory and OCM (no memcpy on OCM). */
+void amp__copy_in(void *dst, const void *ocm_src, uint32_t bytes);
+void amp__copy_out(void *ocm_dst, const void *src, uint32_t bytes);
+
+/* Byte payloads to/from OCM with whole-word accesses (little-endian). */
+void amp__bytes_in(void *dst, const void *ocm_src, uint32_t len);
+void amp__bytes_out(void *ocm_dst, const void *src, uint32_t len);
+
+/* Validate a frame header copied from OCM; payload checked by CRC. */
+int amp__frame_check(const struct amp_frame_hdr *h, const struct amp_frame *f,
+		     uint32_t epoch);
+/* Write a frame (header + payload) to OCM; header fields in h. */
+void amp__frame_put(struct amp_frame *f, struct amp_frame_hdr *h,
+		    const void *payload);
+
+#define AMP_REC_WORDS(type) ((uint32_t)(sizeof(type) / 4u))
+#define AMP_REC_END(type)   ((uint32_t)(offsetof(type, seq_end) / 4u))
+
+/*
+ * Double-buffered record write/read. words = record size in 32-bit
+ * words, end = index of seq_end. The reader returns 0 if the copy in dst
+ * is whole and carries sequence seq, -1 if it was torn.
+ */
+void amp__rec_write(void *ocm_rec, const void *src, uint32_t words,
+		    uint32_t end, uint32_t seq);
+int amp__rec_read(void *dst, const void *ocm_rec, uint32_t words,
+		  uint32_t end, uint32_t seq);
+
+/* Classify a published sequence against the last one read. */
+uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed);
+
+/* CRC of a frame header (crc32 field taken as 0) and its payload. */
+uint32_t amp__frame_crc(const struct amp_frame_hdr *h, const void *payload);
+
+/* Wait until *word == value, at most timeout ticks. 0 or AMP_E_TIMEOUT. */
+int amp__wait_word(const uint32_t *word, uint32_t value, amp_ticks_t timeout);
+
+static inline uint32_t amp__ncopy(uint32_t n)
+{
+	return n > AMP_MAX_AXES ? AMP_MAX_AXES : n;
+}
+
+#endif /* AMP_INTERNAL_H */

@@ -1,0 +1,273 @@
+// SPDX-License-Identifier: MIT
+/*
+ * amp_linux.c - the application-core (Linux) side of amp_lib: region
+ * initialisation, the periodic cycle, and the mailbox requester.
+ */
+#include "amp_internal.h"
+
+#define FB_WORDS  AMP_REC_WORDS(struct amp_fb_record)
+#define FB_END    AMP_REC_END(struct amp_fb_record)
+#define CMD_WORDS AMP_REC_WORDS(struct amp_cmd_record)
+#define CMD_END   AMP_REC_END(struct amp_cmd_record)
+
+int amp_linux_init(struct amp_linux *l, void *base, uint32_t size, uint32_t wd_limit)
+{
+	struct amp_ocm *o = base;
+	struct amp_ocm_header h = { 0 };
+	uint32_t *w = base;
+
+	if (!l || !o || ((uintptr_t)base % AMP_CACHE_LINE) != 0 || size < sizeof(*o))
+		return AMP_E_INVAL;
+	if (wd_limit == 0)
+		wd_limit = AMP_WD_LIMIT_DEFAULT;
+	if (wd_limit > AMP_WD_LIMIT_MAX)
+		return AMP_E_INVAL;
+
+	/* A new epoch, different from whatever the region held before. */
+	AMP_PORT_CACHE_INVAL(o, sizeof(*o));
+	h.epoch = RD(&o->hdr.epoch) + 1u;
+	if (h.epoch == 0)
+		h.epoch = 1;
+
+	/* Invalidate first, so a half-written region never looks valid. */
+	WR(&o->linux_line.state, AMP_LSTATE_INIT);
+	WR(&o->hdr.magic, 0);
+	MB();
+	for (uint32_t i = 0; i < sizeof(*o) / 4u; i++)
+		if (&w[i] != &o->hdr.magic && &w[i] != &o->linux_line.state)
+			WR(&w[i], 0);
+	WR(&o->cyc_sem.sem, AMP_SEM_IDLE);
+	WR(&o->mbox_sem.sem, AMP_SEM_IDLE);
+
+	h.magic = AMP_OCM_MAGIC;
+	h.version = AMP_OCM_VERSION;
+	h.total_size = (uint32_t)sizeof(*o);
+	h.max_axes = AMP_MAX_AXES;
+	h.mbox_capacity = AMP_MBOX_CAPACITY;
+	h.wd_limit = wd_limit;
+	h.crc32 = amp_crc32(0, &h, offsetof(struct amp_ocm_header, crc32));
+	amp__copy_out(&o->hdr, &h, sizeof(h));
+	AMP_PORT_CACHE_CLEAN(o, sizeof(*o));
+	WR_REL(&o->linux_line.state, AMP_LSTATE_READY);
+	AMP_PORT_CACHE_CLEAN(&o->linux_line, 4u);
+
+	*l = (struct amp_linux){ 0 };
+	l->ocm = o;
+	l->epoch = h.epoch;
+	l->wd.limit = wd_limit;
+	return AMP_OK;
+}
+
+void amp_linux_close(struct amp_linux *l)
+{
+	if (l && l->ocm) {
+		WR_REL(&l->ocm->linux_line.state, AMP_LSTATE_STOPPED);
+		AMP_PORT_CACHE_CLEAN(&l->ocm->linux_line, 4u);
+	}
+}
+
+int amp_linux_peer(const struct amp_linux *l)
+{
+	const struct amp_servo_line *sl = &l->ocm->servo_line;
+	uint32_t state, epoch;
+
+	AMP_PORT_CACHE_INVAL(sl, sizeof(*sl));
+	epoch = RD_ACQ(&sl->epoch);
+	state = RD(&sl->state);
+	if (epoch != l->epoch)
+		return AMP_E_PEER_ABSENT;
+	if (state == AMP_SSTATE_RUNNING || state == AMP_SSTATE_SAFESTOP)
+		return AMP_OK;
+	if (state == AMP_SSTATE_FAULT)
+		return AMP_E_PEER_ERROR;
+	return AMP_E_PEER_ABSENT;
+}
+
+static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx)
+{
+	struct amp_ocm *o = l->ocm;
+	struct amp_fb_record f;
+	uint32_t pub;
+
+	AMP_PORT_CACHE_INVAL(&o->servo_line, sizeof(o->servo_line));
+	pub = RD_ACQ(&o->servo_line.fb_pub);
+	rx->status = amp__rx_classify(pub, l->fb_seq, &rx->missed);
+	if (rx->status == AMP_RX_FRESH || rx->status == AMP_RX_MISSED) {
+		if (amp__rec_read(&f, &o->fb[pub & 1u], FB_WORDS, FB_END, pub) != 0) {
+			rx->status = AMP_RX_TORN;
+			rx->missed = 0;
+		} else if (f.epoch != l->epoch || f.n_axes > AMP_MAX_AXES) {
+			rx->status = AMP_RX_INVALID;
+			rx->missed = 0;
+		} else {
+			l->fb = f;
+			l->fb_seq = pub;
+		}
+	}
+	rx->seq = l->fb_seq;
+	switch (rx->status) {
+	case AMP_RX_FRESH: l->st.fresh++; break;
+	case AMP_RX_STALE: l->st.stale++; break;
+	case AMP_RX_TORN: l->st.torn++; break;
+	case AMP_RX_MISSED: l->st.fresh++; l->st.missed += rx->missed; break;
+	default: l->st.invalid++; break;
+	}
+}
+
+int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
+		    uint32_t n_axes, uint32_t flags, struct amp_rx_info *rx)
+{
+	struct amp_rx_info tmp;
+	struct amp_cmd_record c = { 0 };
+	struct amp_ocm *o;
+	uint32_t seq;
+	int peer;
+
+	if (!l || !l->ocm || n_axes > AMP_MAX_AXES || (n_axes && !axes))
+		return AMP_E_INVAL;
+	if (!rx)
+		rx = &tmp;
+	o = l->ocm;
+	peer = amp_linux_peer(l);
+
+	/* 1. heartbeat (the caller has cleared its interrupt flag) */
+	l->cycle++;
+	l->st.cycles++;
+	WR(&o->linux_line.heartbeat, l->cycle);
+	WR(&o->linux_line.cycle, l->cycle);
+	AMP_PORT_CACHE_CLEAN(&o->linux_line, sizeof(o->linux_line));
+
+	/* 2. semaphore: still busy means the servo has not taken the last
+	 * commands (it is late or absent) */
+	AMP_PORT_CACHE_INVAL(&o->cyc_sem, 4u);
+	if (RD_ACQ(&o->cyc_sem.sem) == AMP_SEM_BUSY && peer == AMP_OK)
+		l->st.peer_late++;
+
+	/* 3. switch the response buffer: read the newest feedback */
+	read_feedback(l, rx);
+
+	/* 4. switch the command buffer: write and publish */
+	c.epoch = l->epoch;
+	c.cycle = l->cycle;
+	c.n_axes = n_axes;
+	c.flags = flags;
+	for (uint32_t i = 0; i < n_axes; i++)
+		c.axis[i] = axes[i];
+	seq = l->cmd_seq + 1u;
+	amp__rec_write(&o->cmd[seq & 1u], &c, CMD_WORDS, CMD_END, seq);
+	WR_REL(&o->linux_line.cmd_pub, seq);
+	AMP_PORT_CACHE_CLEAN(&o->linux_line, sizeof(o->linux_line));
+	l->cmd_seq = seq;
+
+	/* 5. set the semaphore if the token is ours (idle) */
+	AMP_PORT_CACHE_INVAL(&o->cyc_sem, 4u);
+	if (RD_ACQ(&o->cyc_sem.sem) == AMP_SEM_IDLE) {
+		WR_REL(&o->cyc_sem.sem, AMP_SEM_BUSY);
+		AMP_PORT_CACHE_CLEAN(&o->cyc_sem, 4u);
+	}
+	AMP_PORT_SIGNAL();
+
+	if (peer != AMP_OK) {
+		l->wd.primed = 0;
+		return peer;
+	}
+	if (RD(&o->servo_line.attach_count) != l->servo_attach) {
+		l->servo_attach = RD(&o->servo_line.attach_count);
+		l->wd.primed = 0;	/* a restarted servo gets a fresh watchdog */
+	}
+	return amp_wd_feed(&l->wd, RD(&o->servo_line.heartbeat));
+}
+
+int amp_linux_mbox_post(struct amp_linux *l, const struct amp_msg *req)
+{
+	struct amp_frame_hdr h = { 0 };
+	struct amp_ocm *o;
+	int rc;
+
+	if (!l || !l->ocm || !req || (req->length && !req->data))
+		return AMP_E_INVAL;
+	if (req->length > AMP_MBOX_CAPACITY)
+		return AMP_E_NOSPC;
+	o = l->ocm;
+	rc = amp_linux_peer(l);
+	if (rc != AMP_OK)
+		return rc;
+	/* 2. read the semaphore: the token must be ours */
+	AMP_PORT_CACHE_INVAL(&o->mbox_sem, 4u);
+	if (RD_ACQ(&o->mbox_sem.sem) != AMP_SEM_IDLE)
+		return AMP_E_BUSY;
+	/* 1, 3. encode the frame and write it */
+	h.epoch = l->epoch;
+	h.seq = ++l->mbox_seq;
+	h.command = req->command;
+	h.length = req->length;
+	amp__frame_put(&o->req, &h, req->data);
+	WR(&o->linux_line.mbox_seq, h.seq);
+	/* 4. set the semaphore: the servo has the token now */
+	WR_REL(&o->mbox_sem.sem, AMP_SEM_BUSY);
+	AMP_PORT_CACHE_CLEAN(&o->mbox_sem, 4u);
+	AMP_PORT_SIGNAL();
+	l->mbox_pending = 1;
+	return AMP_OK;
+}
+
+int amp_linux_mbox_poll(struct amp_linux *l, struct amp_msg *resp)
+{
+	struct amp_frame_hdr h;
+	struct amp_ocm *o;
+	int rc;
+
+	if (!l || !l->ocm || !resp || (resp->capacity && !resp->data) || !l->mbox_pending)
+		return AMP_E_INVAL;
+	o = l->ocm;
+	/* 5. poll the semaphore until the servo has answered */
+	AMP_PORT_CACHE_INVAL(&o->mbox_sem, 4u);
+	if (RD_ACQ(&o->mbox_sem.sem) != AMP_SEM_IDLE) {
+		rc = amp_linux_peer(l);
+		return rc != AMP_OK ? rc : AMP_E_BUSY;
+	}
+	/* 6. read and validate the response */
+	l->mbox_pending = 0;
+	amp__copy_in(&h, &o->resp.hdr, sizeof(h));
+	rc = amp__frame_check(&h, &o->resp, l->epoch);
+	if (rc == AMP_OK && h.seq != l->mbox_seq)
+		rc = AMP_E_PROTO;
+	if (rc == AMP_OK && h.length > resp->capacity)
+		rc = AMP_E_NOSPC;
+	if (rc != AMP_OK) {
+		l->st.mbox_err++;
+		return rc;
+	}
+	amp__bytes_in(resp->data, o->resp.payload, h.length);
+	resp->command = h.command;
+	resp->status = h.status;
+	resp->length = h.length;
+	l->st.mbox_ok++;
+	return AMP_OK;
+}
+
+int amp_linux_mbox_call(struct amp_linux *l, const struct amp_msg *req,
+			struct amp_msg *resp, amp_ticks_t timeout)
+{
+	amp_ticks_t t0 = amp_port_ticks();
+	int rc;
+
+	/* An earlier request that timed out may still be with the servo:
+	 * wait (within the same timeout) for it to hand the token back. */
+	while ((rc = amp_linux_mbox_post(l, req)) == AMP_E_BUSY) {
+		if ((amp_ticks_t)(amp_port_ticks() - t0) >= timeout)
+			return AMP_E_BUSY;
+		AMP_PORT_RELAX();
+	}
+	if (rc != AMP_OK)
+		return rc;
+	while ((rc = amp_linux_mbox_poll(l, resp)) == AMP_E_BUSY) {
+		if ((amp_ticks_t)(amp_port_ticks() - t0) >= timeout) {
+			l->mbox_pending = 0;
+			l->st.mbox_err++;
+			return AMP_E_TIMEOUT;
+		}
+		AMP_PORT_RELAX();
+	}
+	return rc;
+}

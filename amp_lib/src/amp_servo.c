@@ -1,0 +1,229 @@
+// SPDX-License-Identifier: MIT
+/*
+ * amp_servo.c - the servo-core side of amp_lib: attach, the periodic
+ * cycle (never blocks longer than the caller's timeout), and the
+ * non-blocking mailbox responder. Runs bare-metal: no allocation, no
+ * library calls beyond what the compiler needs.
+ */
+#include "amp_internal.h"
+
+#define FB_WORDS  AMP_REC_WORDS(struct amp_fb_record)
+#define FB_END    AMP_REC_END(struct amp_fb_record)
+#define CMD_WORDS AMP_REC_WORDS(struct amp_cmd_record)
+#define CMD_END   AMP_REC_END(struct amp_cmd_record)
+
+int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size)
+{
+	struct amp_ocm *o = base;
+	struct amp_servo_line *sl;
+	struct amp_ocm_header h;
+	uint32_t same;
+
+	if (!s || !o || ((uintptr_t)base % AMP_CACHE_LINE) != 0 || size < sizeof(*o))
+		return AMP_E_INVAL;
+	sl = &o->servo_line;
+	AMP_PORT_CACHE_INVAL(&o->linux_line, sizeof(o->linux_line));
+	if (RD_ACQ(&o->linux_line.state) != AMP_LSTATE_READY)
+		return AMP_E_PEER_ABSENT;
+	amp__copy_in(&h, &o->hdr, sizeof(h));
+	if (h.magic != AMP_OCM_MAGIC)
+		return AMP_E_PEER_ABSENT;
+	if (h.version != AMP_OCM_VERSION || h.total_size != sizeof(*o) ||
+	    h.max_axes != AMP_MAX_AXES || h.mbox_capacity != AMP_MBOX_CAPACITY ||
+	    h.epoch == 0 || h.wd_limit == 0 || h.wd_limit > AMP_WD_LIMIT_MAX ||
+	    h.crc32 != amp_crc32(0, &h, offsetof(struct amp_ocm_header, crc32)))
+		return AMP_E_LAYOUT;
+
+	*s = (struct amp_servo){ 0 };
+	s->ocm = o;
+	s->epoch = h.epoch;
+	s->wd.limit = h.wd_limit;
+	AMP_PORT_CACHE_INVAL(sl, sizeof(*sl));
+	/* Re-attaching in the same epoch (the servo restarted while Linux
+	 * kept the region): continue the sequences, count the restart. */
+	same = RD(&sl->epoch) == h.epoch;
+	s->fb_seq = same ? RD(&sl->fb_pub) : 0;
+	s->heartbeat = RD(&sl->heartbeat);
+	s->cmd_seq = RD_ACQ(&o->linux_line.cmd_pub);
+	WR(&sl->attach_count, same ? RD(&sl->attach_count) + 1u : 1u);
+	WR(&sl->fault, 0);
+	WR(&sl->cmd_stale, 0);
+	WR(&sl->cmd_missed, 0);
+	WR(&sl->state, AMP_SSTATE_RUNNING);
+	WR_REL(&sl->epoch, h.epoch);
+	AMP_PORT_CACHE_CLEAN(sl, sizeof(*sl));
+	return AMP_OK;
+}
+
+void amp_servo_heartbeat(struct amp_servo *s)
+{
+	WR(&s->ocm->servo_line.heartbeat, ++s->heartbeat);
+	AMP_PORT_CACHE_CLEAN(&s->ocm->servo_line, sizeof(s->ocm->servo_line));
+}
+
+void amp_servo_set_state(struct amp_servo *s, uint32_t state, uint32_t fault)
+{
+	struct amp_servo_line *sl = &s->ocm->servo_line;
+
+	WR(&sl->fault, fault);
+	WR_REL(&sl->state, state);
+	AMP_PORT_CACHE_CLEAN(sl, sizeof(*sl));
+}
+
+int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_info *rx)
+{
+	struct amp_ocm *o = s->ocm;
+	struct amp_cmd_record c;
+	amp_ticks_t t0 = amp_port_ticks();
+	uint32_t pub;
+	int wd;
+
+	/* 1. heartbeat (the caller has cleared its interrupt flag) */
+	s->cycle++;
+	s->st.cycles++;
+	amp_servo_heartbeat(s);
+	rx->status = AMP_RX_STALE;
+	rx->missed = 0;
+	rx->seq = s->cmd_seq;
+
+	AMP_PORT_CACHE_INVAL(&o->linux_line, sizeof(o->linux_line));
+	AMP_PORT_CACHE_INVAL(&o->hdr, sizeof(o->hdr));
+	if (RD_ACQ(&o->linux_line.state) != AMP_LSTATE_READY ||
+	    RD(&o->hdr.epoch) != s->epoch) {
+		s->st.stale++;
+		return AMP_E_PEER_ABSENT;	/* closed or re-initialised */
+	}
+	wd = amp_wd_feed(&s->wd, RD(&o->linux_line.heartbeat));
+
+	/* 2. poll the semaphore (or a newer sequence), bounded by timeout */
+	for (;;) {
+		AMP_PORT_CACHE_INVAL(&o->cyc_sem, 4u);
+		AMP_PORT_CACHE_INVAL(&o->linux_line, sizeof(o->linux_line));
+		pub = RD_ACQ(&o->linux_line.cmd_pub);
+		if (pub != s->cmd_seq || RD_ACQ(&o->cyc_sem.sem) == AMP_SEM_BUSY)
+			break;
+		if ((amp_ticks_t)(amp_port_ticks() - t0) >= timeout)
+			break;
+		AMP_PORT_RELAX();
+	}
+
+	/* 3. switch the command buffer: read the newest commands */
+	rx->status = amp__rx_classify(pub, s->cmd_seq, &rx->missed);
+	if (rx->status == AMP_RX_FRESH || rx->status == AMP_RX_MISSED) {
+		if (amp__rec_read(&c, &o->cmd[pub & 1u], CMD_WORDS, CMD_END, pub) != 0) {
+			rx->status = AMP_RX_TORN;
+			rx->missed = 0;
+		} else if (c.epoch != s->epoch || c.n_axes > AMP_MAX_AXES) {
+			rx->status = AMP_RX_INVALID;
+			rx->missed = 0;
+		} else {
+			s->cmd = c;
+			s->cmd_seq = pub;
+		}
+	}
+	rx->seq = s->cmd_seq;
+	switch (rx->status) {
+	case AMP_RX_FRESH: s->st.fresh++; break;
+	case AMP_RX_MISSED: s->st.fresh++; s->st.missed += rx->missed; break;
+	case AMP_RX_STALE: s->st.stale++; break;
+	case AMP_RX_TORN: s->st.torn++; break;
+	default: s->st.invalid++; break;
+	}
+	if (rx->status != AMP_RX_FRESH) {
+		WR(&o->servo_line.cmd_stale, s->st.stale + s->st.torn + s->st.invalid);
+		WR(&o->servo_line.cmd_missed, s->st.missed);
+	}
+	return wd;
+}
+
+int amp_servo_cycle_tx(struct amp_servo *s, const struct amp_fb_axis *axes,
+		       uint32_t n_axes, uint32_t t_cycle, uint32_t irq_latency)
+{
+	struct amp_ocm *o = s->ocm;
+	struct amp_fb_record f = { 0 };
+	uint32_t seq;
+
+	if (n_axes > AMP_MAX_AXES || (n_axes && !axes))
+		return AMP_E_INVAL;
+	/* 4. switch the response buffer: write and publish the feedback */
+	f.epoch = s->epoch;
+	f.cmd_seq = s->cmd_seq;
+	f.cycle = s->cycle;
+	f.t_cycle = t_cycle;
+	f.irq_latency = irq_latency;
+	f.n_axes = n_axes;
+	f.status = RD(&o->servo_line.state);
+	for (uint32_t i = 0; i < n_axes; i++)
+		f.axis[i] = axes[i];
+	seq = s->fb_seq + 1u;
+	amp__rec_write(&o->fb[seq & 1u], &f, FB_WORDS, FB_END, seq);
+	WR_REL(&o->servo_line.fb_pub, seq);
+	AMP_PORT_CACHE_CLEAN(&o->servo_line, sizeof(o->servo_line));
+	s->fb_seq = seq;
+
+	/* 5. hand the semaphore back (idle) if we hold the token */
+	AMP_PORT_CACHE_INVAL(&o->cyc_sem, 4u);
+	if (RD_ACQ(&o->cyc_sem.sem) == AMP_SEM_BUSY) {
+		WR_REL(&o->cyc_sem.sem, AMP_SEM_IDLE);
+		AMP_PORT_CACHE_CLEAN(&o->cyc_sem, 4u);
+	}
+	AMP_PORT_SIGNAL();
+	return AMP_OK;
+}
+
+static void mbox_answer(struct amp_servo *s, int32_t status,
+			const void *payload, uint32_t len)
+{
+	struct amp_frame_hdr h = { 0 };
+
+	h.epoch = s->epoch;
+	h.seq = s->mbox_seq;
+	h.command = s->mbox_cmd;
+	h.status = status;
+	h.length = len;
+	amp__frame_put(&s->ocm->resp, &h, payload);
+	s->mbox_state = 0;
+	/* 5. set the semaphore: the response is complete */
+	WR_REL(&s->ocm->mbox_sem.sem, AMP_SEM_IDLE);
+	AMP_PORT_CACHE_CLEAN(&s->ocm->mbox_sem, 4u);
+	AMP_PORT_SIGNAL();
+}
+
+int amp_servo_mbox_poll(struct amp_servo *s, struct amp_mbox_req *req)
+{
+	struct amp_ocm *o = s->ocm;
+	struct amp_frame_hdr h;
+
+	if (s->mbox_state)
+		return 0;	/* the request handed out is still unanswered */
+	/* 1. poll the semaphore: busy means Linux has posted a request */
+	AMP_PORT_CACHE_INVAL(&o->mbox_sem, 4u);
+	if (RD_ACQ(&o->mbox_sem.sem) != AMP_SEM_BUSY)
+		return 0;
+	/* 2. read the request, every field validated */
+	amp__copy_in(&h, &o->req.hdr, sizeof(h));
+	s->mbox_seq = h.seq;
+	s->mbox_cmd = h.command;
+	if (amp__frame_check(&h, &o->req, s->epoch) != AMP_OK) {
+		s->st.mbox_err++;
+		mbox_answer(s, AMP_E_PROTO, 0, 0);
+		return AMP_E_PROTO;
+	}
+	s->mbox_state = 1;
+	s->st.mbox_ok++;
+	req->command = h.command;
+	req->length = h.length;
+	req->payload = o->req.payload;
+	return 1;
+}
+
+int amp_servo_mbox_respond(struct amp_servo *s, int32_t status,
+			   const void *payload, uint32_t len)
+{
+	if (!s->mbox_state || (len && !payload))
+		return AMP_E_INVAL;
+	if (len > AMP_MBOX_CAPACITY)
+		return AMP_E_NOSPC;
+	mbox_answer(s, status, payload, len);
+	return AMP_OK;
+}
