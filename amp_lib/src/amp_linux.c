@@ -155,16 +155,19 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		c.axis[i] = axes[i];
 	seq = l->cmd_seq + 1u;
 	amp__rec_write(&o->cmd[seq & 1u], &c, CMD_WORDS, CMD_END, seq);
-	WR_REL(&o->linux_line.cmd_pub, seq);
-	AMP_PORT_CACHE_CLEAN(&o->linux_line, sizeof(o->linux_line));
-	l->cmd_seq = seq;
 
-	/* 5. set the semaphore if the token is ours (idle) */
+	/* 5. set the semaphore if the token is ours (idle), THEN publish the
+	 * sequence: a servo that sees the new sequence always finds the
+	 * semaphore busy and hands it back, so "busy" never outlives the
+	 * exchange it stands for */
 	AMP_PORT_CACHE_INVAL(&o->cyc_sem, 4u);
 	if (RD_ACQ(&o->cyc_sem.sem) == AMP_SEM_IDLE) {
 		WR_REL(&o->cyc_sem.sem, AMP_SEM_BUSY);
 		AMP_PORT_CACHE_CLEAN(&o->cyc_sem, 4u);
 	}
+	WR_REL(&o->linux_line.cmd_pub, seq);
+	AMP_PORT_CACHE_CLEAN(&o->linux_line, sizeof(o->linux_line));
+	l->cmd_seq = seq;
 	AMP_PORT_SIGNAL();
 
 	if (peer != AMP_OK) {

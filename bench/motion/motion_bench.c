@@ -1,0 +1,411 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * motion_bench: throughput of the motion pipeline and speed-up of the
+ * hybrid scheduler.  Prints figures and writes them as JSON; it asserts
+ * nothing about timing.
+ *
+ *   motion_bench [--blocks N] [--arcs N] [--reps R] [--workers W] [--json PATH]
+ *
+ * 1. blocks/s through the whole pipeline on one thread (synchronous mode,
+ *    the caller consumes every setpoint), on a mixed program of N blocks;
+ * 2. the same planning-heavy program (N short arcs, fine chord tolerance)
+ *    on the worker pool, setpoints drained by a sink task: hybrid on W
+ *    workers vs 1, and vs a plain FIFO schedule on W workers.  Each
+ *    configuration runs R times, interleaved; the best time counts.
+ */
+#define _POSIX_C_SOURCE 200809L
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "motion/motion.h"
+#include "motion/sched.h"
+
+static double now_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static double cpu_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static char *append(char *p, size_t *len, size_t *cap, const char *line)
+{
+	size_t l = strlen(line);
+
+	if (*len + l + 1 > *cap) {
+		size_t nc = (*cap ? *cap * 2 : 65536) + l;
+		char *q = realloc(p, nc);
+		if (!q) {
+			free(p);
+			return NULL;
+		}
+		p = q;
+		*cap = nc;
+	}
+	memcpy(p + *len, line, l + 1);
+	*len += l;
+	return p;
+}
+
+/* lines, arcs and a dwell now and then, wandering in a 100 mm square */
+static char *gen_mixed(int n)
+{
+	char *p = NULL, line[128];
+	size_t len = 0, cap = 0;
+	uint32_t s = 7;
+	double x = 0, y = 0;
+
+	p = append(p, &len, &cap, "G21 G90 G17 F6000\n");
+	for (int i = 0; p && i < n; i++) {
+		s = s * 1664525u + 1013904223u;
+		double nx = fmin(100, fmax(-100, x + (double)((s >> 8) % 2001) / 100.0 - 10.0));
+		s = s * 1664525u + 1013904223u;
+		double ny = fmin(100, fmax(-100, y + (double)((s >> 8) % 2001) / 100.0 - 10.0));
+		double d = hypot(nx - x, ny - y);
+		if (i % 4 == 3 && d > 0.1)
+			snprintf(line, sizeof(line), "G%d X%.3f Y%.3f R%.3f\n", i % 8 == 3 ? 2 : 3,
+				 nx, ny, d * 0.75);
+		else if (i % 97 == 0)
+			snprintf(line, sizeof(line), "G4 P0.002\n");
+		else
+			snprintf(line, sizeof(line), "G1 X%.3f Y%.3f\n", nx, ny);
+		if (!strncmp(line, "G4", 2)) {
+			p = append(p, &len, &cap, line);
+			continue;
+		}
+		x = nx;
+		y = ny;
+		p = append(p, &len, &cap, line);
+	}
+	return p ? append(p, &len, &cap, "M2\n") : NULL;
+}
+
+/* many short arcs along a zigzag: planning heavy */
+static char *gen_arcs(int n)
+{
+	char *p = NULL, line[128];
+	size_t len = 0, cap = 0;
+	double x = 0, y = 0, dir = 1;
+
+	p = append(p, &len, &cap, "G21 G90 G17 F6000\n");
+	for (int i = 1; p && i <= n; i++) {
+		if (i % 100 == 0) {
+			dir = -dir;
+			y += 1.0;
+			snprintf(line, sizeof(line), "G1 Y%.3f\n", y);
+		} else {
+			x += 0.5 * dir;
+			snprintf(line, sizeof(line), "G%d X%.3f Y%.3f R%.3f\n", i % 2 ? 2 : 3, x,
+				 y, i % 3 ? 0.4 : -0.3);
+		}
+		p = append(p, &len, &cap, line);
+	}
+	return p ? append(p, &len, &cap, "M2\n") : NULL;
+}
+
+/* Calibration: the speed-up the machine gives right now to two threads of
+ * pure, independent arithmetic (no sharing).  A figure near 2 means two
+ * cores were free; near 1 means the other core was busy elsewhere. */
+static void *spin(void *arg)
+{
+	volatile double x = 1.0;
+	long n = *(long *)arg;
+
+	for (long i = 0; i < n; i++)
+		x = x * 1.0000001 + 1e-9;
+	return NULL;
+}
+
+static double calibrate(unsigned workers)
+{
+	long n = 20000000;
+	pthread_t th[8];
+	double t0 = now_s();
+
+	for (unsigned i = 0; i < workers; i++)
+		spin(&n);
+	double seq = now_s() - t0;
+	t0 = now_s();
+	for (unsigned i = 0; i < workers; i++)
+		if (pthread_create(&th[i], NULL, spin, &n))
+			return 0;
+	for (unsigned i = 0; i < workers; i++)
+		pthread_join(th[i], NULL);
+	double par = now_s() - t0;
+	return par > 0 ? seq / par : 0;
+}
+
+struct result {
+	double wall, cpu;
+	uint64_t blocks, segments, setpoints, checksum;
+	uint64_t busy_ns[MOTION_N_TASKS];
+	uint64_t jobs[MOTION_MAX_WORKERS];
+	uint64_t idle[MOTION_MAX_WORKERS];
+	const char *names[MOTION_N_TASKS];
+	unsigned n_tasks;
+};
+
+static int run_sync(const struct motion_config *c, const char *prog, struct result *r)
+{
+	struct motion *m;
+	struct motion_error e;
+	struct motion_setpoint sp;
+	enum motion_status st;
+	struct motion_stats s;
+
+	memset(r, 0, sizeof(*r));
+	if (motion_create(c, &m, &e) || motion_load_program(m, prog, strlen(prog)))
+		return -1;
+	double t0 = now_s(), c0 = cpu_s();
+	while ((st = motion_next_setpoint(m, &sp)) == MOTION_ST_MOVING ||
+	       st == MOTION_ST_IDLE)
+		for (unsigned k = 0; k < sp.n_axes; k++)
+			r->checksum += (uint64_t)(uint32_t)sp.pos[k];
+	r->wall = now_s() - t0;
+	r->cpu = cpu_s() - c0;
+	motion_get_stats(m, &s);
+	r->blocks = s.blocks;
+	r->segments = s.segments;
+	r->setpoints = s.setpoints;
+	int rc = st == MOTION_ST_DONE ? 0 : -1;
+	if (rc)
+		fprintf(stderr, "sync run: %s\n",
+			motion_last_error(m) ? motion_last_error(m)->msg : "did not finish");
+	motion_destroy(m);
+	return rc;
+}
+
+static int run_pool(struct motion_config c, const char *prog, unsigned workers,
+		    enum motion_policy pol, struct result *r)
+{
+	struct motion *m;
+	struct motion_error e;
+	struct motion_stats s;
+
+	memset(r, 0, sizeof(*r));
+	c.drain_sink = true;
+	c.policy = pol;
+	if (motion_create(&c, &m, &e) || motion_load_program(m, prog, strlen(prog)))
+		return -1;
+	double t0 = now_s(), c0 = cpu_s();
+	if (motion_start(m, workers))
+		return -1;
+	while (!motion_done(m)) {
+		struct timespec ts = { 0, 100000 };
+		nanosleep(&ts, NULL);
+	}
+	r->wall = now_s() - t0;
+	motion_stop(m);
+	r->cpu = cpu_s() - c0;
+	motion_get_stats(m, &s);
+	r->blocks = s.blocks;
+	r->segments = s.segments;
+	r->setpoints = s.setpoints;
+	r->checksum = motion_sink_checksum(m);
+	r->n_tasks = s.n_tasks;
+	for (unsigned t = 0; t < s.n_tasks; t++) {
+		r->busy_ns[t] = s.busy_ns[t];
+		r->names[t] = s.task_name[t];
+		for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++)
+			r->jobs[w] += s.runs[t][w];
+	}
+	for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++)
+		r->idle[w] = s.idle[w];
+	int rc = motion_last_error(m) ? -1 : 0;
+	motion_destroy(m);
+	return rc;
+}
+
+int main(int argc, char **argv)
+{
+	int blocks = 50000, arcs = 20000, reps = 3, batch = 1024, queue = 8192;
+	bool jerk = false;
+	unsigned workers = 2;
+	const char *json = NULL;
+
+	for (int i = 1; i < argc; i++) {
+		if (!strcmp(argv[i], "--blocks") && i + 1 < argc)
+			blocks = atoi(argv[++i]);
+		else if (!strcmp(argv[i], "--arcs") && i + 1 < argc)
+			arcs = atoi(argv[++i]);
+		else if (!strcmp(argv[i], "--reps") && i + 1 < argc)
+			reps = atoi(argv[++i]);
+		else if (!strcmp(argv[i], "--workers") && i + 1 < argc)
+			workers = (unsigned)atoi(argv[++i]);
+		else if (!strcmp(argv[i], "--batch") && i + 1 < argc)
+			batch = atoi(argv[++i]);
+		else if (!strcmp(argv[i], "--queue") && i + 1 < argc)
+			queue = atoi(argv[++i]);
+		else if (!strcmp(argv[i], "--jerk"))
+			jerk = true;
+		else if (!strcmp(argv[i], "--json") && i + 1 < argc)
+			json = argv[++i];
+		else {
+			fprintf(stderr, "usage: motion_bench [--blocks N] [--arcs N] [--reps R] "
+					"[--workers W] [--batch B] [--queue Q] [--jerk] [--json PATH]\n");
+			return 2;
+		}
+	}
+	if (blocks < 1 || arcs < 1 || reps < 1 || workers < 1 || workers > 8 || batch < 1 || queue < 16)
+		return 2;
+
+	/* 1. one thread, whole pipeline */
+	struct motion_config c;
+	motion_config_default(&c);
+	char *mixed = gen_mixed(blocks);
+	struct result rs, best_sync;
+	memset(&best_sync, 0, sizeof(best_sync));
+	if (!mixed)
+		return 1;
+	for (int k = 0; k < reps; k++) {
+		if (run_sync(&c, mixed, &rs))
+			return 1;
+		if (k == 0 || rs.wall < best_sync.wall)
+			best_sync = rs;
+	}
+	double bps = best_sync.blocks / best_sync.wall;
+	printf("one thread, mixed program: %llu blocks, %llu segments, %llu setpoints "
+	       "(%.1f s of motion) in %.3f s\n",
+	       (unsigned long long)best_sync.blocks, (unsigned long long)best_sync.segments,
+	       (unsigned long long)best_sync.setpoints, best_sync.setpoints * c.period_us * 1e-6,
+	       best_sync.wall);
+	printf("  %.0f blocks/s, %.0f segments/s, %.0f setpoints/s\n", bps,
+	       best_sync.segments / best_sync.wall, best_sync.setpoints / best_sync.wall);
+
+	/* 2. scheduler speed-up on a planning-heavy program */
+	struct motion_config h;
+	motion_config_default(&h);
+	h.chord_tol = 0.0002;
+	for (int k = 0; k < 3; k++)
+		h.axis[k].amax = 10000;
+	h.batch = (uint32_t)batch;
+	h.jerk_limited = jerk;
+	for (int k = 0; k < 3; k++)
+		h.axis[k].jmax = 1e6;
+	h.q_blocks = (uint32_t)queue / 4;
+	h.q_segments = (uint32_t)queue;
+	h.q_planned = (uint32_t)queue / 2;
+	h.q_profiles = (uint32_t)queue / 2;
+	h.q_setpoints = (uint32_t)queue;
+	char *heavy = gen_arcs(arcs);
+	if (!heavy)
+		return 1;
+	struct cfgs {
+		const char *name;
+		unsigned w;
+		enum motion_policy pol;
+		struct result best;
+	} cf[4];
+	memset(cf, 0, sizeof(cf));
+	cf[0].name = "hybrid_1"; cf[0].w = 1; cf[0].pol = MOTION_POLICY_HYBRID;
+	cf[1].name = "hybrid_n"; cf[1].w = workers; cf[1].pol = MOTION_POLICY_HYBRID;
+	cf[2].name = "fifo_1"; cf[2].w = 1; cf[2].pol = MOTION_POLICY_FIFO;
+	cf[3].name = "fifo_n"; cf[3].w = workers; cf[3].pol = MOTION_POLICY_FIFO;
+	struct result ref;
+	if (run_sync(&h, heavy, &ref))
+		return 1;
+	double calib_best = 0;
+	for (int k = 0; k < reps; k++) {
+		double cal = calibrate(workers);
+		calib_best = cal > calib_best ? cal : calib_best;
+		for (int i = 0; i < 4; i++) {
+			struct result r;
+			if (run_pool(h, heavy, cf[i].w, cf[i].pol, &r)) {
+				fprintf(stderr, "%s failed\n", cf[i].name);
+				return 1;
+			}
+			if (r.checksum != ref.checksum || r.setpoints != ref.setpoints) {
+				fprintf(stderr, "%s: setpoints differ from the synchronous run\n",
+					cf[i].name);
+				return 1;
+			}
+			if (k == 0 || r.wall < cf[i].best.wall)
+				cf[i].best = r;
+		}
+	}
+	printf("planning-heavy program: %llu arcs/lines, %llu segments, %llu setpoints\n",
+	       (unsigned long long)ref.blocks, (unsigned long long)ref.segments,
+	       (unsigned long long)ref.setpoints);
+	for (int i = 0; i < 4; i++)
+		printf("  %-9s %u worker(s): %.3f s wall, %.3f s cpu, jobs per worker %llu/%llu, idle waits %llu/%llu\n",
+		       cf[i].name, cf[i].w, cf[i].best.wall, cf[i].best.cpu,
+		       (unsigned long long)cf[i].best.jobs[0],
+		       (unsigned long long)cf[i].best.jobs[1],
+		       (unsigned long long)cf[i].best.idle[0],
+		       (unsigned long long)cf[i].best.idle[1]);
+	const struct result *h1 = &cf[1 - 1].best;
+	printf("  time per task (hybrid, 1 worker):");
+	uint64_t tot = 0, mx = 0;
+	for (unsigned t = 0; t < h1->n_tasks; t++) {
+		tot += h1->busy_ns[t];
+		mx = h1->busy_ns[t] > mx ? h1->busy_ns[t] : mx;
+	}
+	for (unsigned t = 0; t < h1->n_tasks; t++)
+		printf(" %s %.0f%%", h1->names[t], 100.0 * h1->busy_ns[t] / (double)tot);
+	printf("\n");
+	double sp_h = cf[0].best.wall / cf[1].best.wall;
+	double sp_f = cf[3].best.wall / cf[1].best.wall;
+	double bound = mx ? (double)tot / (double)mx : 0;
+	printf("  speed-up hybrid %u vs 1 worker: %.3f (bound from the largest task: %.2f)\n",
+	       workers, sp_h, bound < workers ? bound : (double)workers);
+	printf("  hybrid vs plain FIFO, %u workers: %.3f\n", workers, sp_f);
+	printf("  calibration: %u threads of independent arithmetic ran %.2fx faster than one"
+	       " (what the machine offered during the runs)\n", workers, calib_best);
+	long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+	double load[1] = { -1 };
+	FILE *lf = fopen("/proc/loadavg", "r");
+	if (lf) {
+		if (fscanf(lf, "%lf", &load[0]) != 1)
+			load[0] = -1;
+		fclose(lf);
+	}
+	printf("  machine: %ld cpus online, load average %.2f at the end\n", ncpu, load[0]);
+
+	if (json) {
+		FILE *f = fopen(json, "w");
+		if (!f) {
+			perror(json);
+			return 1;
+		}
+		fprintf(f, "{\n  \"benchmark\": \"motion_bench\",\n");
+		fprintf(f, "  \"command\": \"build/motion/host/motion_bench --blocks %d --arcs %d --reps %d --workers %u --batch %d --queue %d%s\",\n",
+			blocks, arcs, reps, workers, batch, queue, jerk ? " --jerk" : "");
+		fprintf(f, "  \"machine\": {\"cpus_online\": %ld, \"loadavg_1min_at_end\": %.2f},\n", ncpu, load[0]);
+		fprintf(f, "  \"single_thread\": {\"program\": \"mixed lines/arcs/dwells\", \"blocks\": %llu, \"segments\": %llu, \"setpoints\": %llu, \"wall_s\": %.6f, \"blocks_per_s\": %.1f, \"segments_per_s\": %.1f, \"setpoints_per_s\": %.1f},\n",
+			(unsigned long long)best_sync.blocks, (unsigned long long)best_sync.segments,
+			(unsigned long long)best_sync.setpoints, best_sync.wall, bps,
+			best_sync.segments / best_sync.wall, best_sync.setpoints / best_sync.wall);
+		fprintf(f, "  \"scheduler\": {\n    \"program\": \"short arcs, chord tolerance 0.2 um\", \"blocks\": %llu, \"segments\": %llu, \"setpoints\": %llu, \"workers\": %u, \"reps\": %d,\n",
+			(unsigned long long)ref.blocks, (unsigned long long)ref.segments,
+			(unsigned long long)ref.setpoints, workers, reps);
+		for (int i = 0; i < 4; i++)
+			fprintf(f, "    \"%s\": {\"workers\": %u, \"wall_s\": %.6f, \"cpu_s\": %.6f},\n",
+				cf[i].name, cf[i].w, cf[i].best.wall, cf[i].best.cpu);
+		fprintf(f, "    \"task_time_share\": {");
+		for (unsigned t = 0; t < h1->n_tasks; t++)
+			fprintf(f, "%s\"%s\": %.4f", t ? ", " : "", h1->names[t],
+				h1->busy_ns[t] / (double)tot);
+		fprintf(f, "},\n");
+		fprintf(f, "    \"speedup_hybrid_n_over_1\": %.4f,\n", sp_h);
+		fprintf(f, "    \"speedup_hybrid_over_fifo_n\": %.4f,\n", sp_f);
+		fprintf(f, "    \"speedup_bound_largest_task\": %.4f,\n",
+			bound < workers ? bound : (double)workers);
+		fprintf(f, "    \"calibration_independent_threads_speedup\": %.4f\n  }\n}\n",
+			calib_best);
+		fclose(f);
+	}
+	free(mixed);
+	free(heavy);
+	return 0;
+}

@@ -1,0 +1,451 @@
+/* SPDX-License-Identifier: MIT */
+#define _POSIX_C_SOURCE 200809L
+#include "motion/sched.h"
+
+#include <errno.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+struct sched_choice sched_decide(enum motion_policy policy,
+				 const struct sched_pstate *p, size_t np,
+				 const struct sched_dstate *d, size_t nd)
+{
+	struct sched_choice c = { SCHED_IDLE, -1 };
+	int best = -1;
+
+	/* A ready periodic task always wins: highest priority (lowest P),
+	 * then the lowest index. */
+	for (size_t i = 0; i < np; i++) {
+		if (!p[i].ready || p[i].running)
+			continue;
+		if (best < 0 || p[i].prio < p[best].prio)
+			best = (int)i;
+	}
+	if (best >= 0) {
+		c.kind = SCHED_PERIODIC;
+		c.index = best;
+		return c;
+	}
+
+	for (size_t i = 0; i < nd; i++) {
+		if (d[i].running)                /* rule 1 */
+			continue;
+		if (d[i].ul == 0 || d[i].dl >= d[i].dcap) /* rule 2 */
+			continue;
+		if (best < 0) {
+			best = (int)i;
+			continue;
+		}
+		const struct sched_dstate *b = &d[best];
+		if (policy == MOTION_POLICY_FIFO) {
+			/* longest-waiting runnable task first */
+			if (d[i].last < b->last ||
+			    (d[i].last == b->last && d[i].order < b->order))
+				best = (int)i;
+			continue;
+		}
+		int64_t di = (int64_t)d[i].ul - (int64_t)d[i].dl;
+		int64_t db = (int64_t)b->ul - (int64_t)b->dl;
+		if (di > db || (di == db && d[i].order < b->order)) /* 3, 4 */
+			best = (int)i;
+	}
+	if (best >= 0) {
+		c.kind = SCHED_DATA;
+		c.index = best;
+	}
+	return c;
+}
+
+static uint64_t now_ns(void)
+{
+	struct timespec ts;
+
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (uint64_t)ts.tv_sec * 1000000000u + (uint64_t)ts.tv_nsec;
+}
+
+uint64_t sched_now_us(void)
+{
+	struct timespec ts;
+
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
+}
+
+struct task {
+	struct sched_task_desc d;
+	bool running;
+	uint64_t next_release; /* periodic */
+	uint64_t last;         /* data: dispatch sequence */
+	uint64_t runs[SCHED_MAX_WORKERS];
+	uint64_t items;
+	uint64_t overruns;
+	uint64_t busy_ns;
+};
+
+struct worker {
+	struct sched *s;
+	unsigned id;
+	pthread_t th;
+};
+
+struct sched {
+	enum motion_policy policy;
+	size_t n;
+	struct task t[SCHED_MAX_TASKS];
+	size_t np, nd;
+	int pidx[SCHED_MAX_TASKS]; /* periodic -> task index */
+	int didx[SCHED_MAX_TASKS]; /* data -> task index */
+	pthread_mutex_t lock;
+	pthread_cond_t cond;
+	atomic_int waiting;
+	atomic_bool stop;
+	unsigned workers;
+	atomic_bool started;
+	struct worker w[SCHED_MAX_WORKERS];
+	uint64_t idle[SCHED_MAX_WORKERS];
+	uint64_t seq;
+	uint64_t t0;
+	/* trace */
+	unsigned nlevels;
+	const char *level_name[SCHED_MAX_LEVELS];
+	sched_sample_fn sample;
+	void *sample_arg;
+	pthread_mutex_t trace_lock;
+	uint32_t trace_cap, trace_n;
+	uint64_t trace_dropped;
+	uint64_t *trace_t;
+	uint32_t *trace_v;
+};
+
+struct sched *sched_create(enum motion_policy policy,
+			   const struct sched_task_desc *tasks, size_t n,
+			   uint32_t trace_samples)
+{
+	struct sched *s;
+	pthread_condattr_t ca;
+
+	if (n == 0 || n > SCHED_MAX_TASKS)
+		return NULL;
+	s = calloc(1, sizeof(*s));
+	if (!s)
+		return NULL;
+	s->policy = policy;
+	s->n = n;
+	s->t0 = sched_now_us();
+	for (size_t i = 0; i < n; i++) {
+		s->t[i].d = tasks[i];
+		if (tasks[i].periodic) {
+			if (tasks[i].period_us == 0)
+				goto fail;
+			s->pidx[s->np++] = (int)i;
+			s->t[i].next_release = s->t0 + tasks[i].period_us;
+		} else {
+			if (!tasks[i].levels)
+				goto fail;
+			s->didx[s->nd++] = (int)i;
+		}
+		if (!tasks[i].run)
+			goto fail;
+	}
+	if (trace_samples) {
+		s->trace_t = calloc(trace_samples, sizeof(*s->trace_t));
+		s->trace_v = calloc((size_t)trace_samples * SCHED_MAX_LEVELS,
+				    sizeof(*s->trace_v));
+		if (!s->trace_t || !s->trace_v)
+			goto fail;
+		s->trace_cap = trace_samples;
+	}
+	pthread_mutex_init(&s->lock, NULL);
+	pthread_mutex_init(&s->trace_lock, NULL);
+	pthread_condattr_init(&ca);
+	pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+	pthread_cond_init(&s->cond, &ca);
+	pthread_condattr_destroy(&ca);
+	atomic_init(&s->waiting, 0);
+	atomic_init(&s->stop, false);
+	atomic_init(&s->started, false);
+	return s;
+fail:
+	free(s->trace_t);
+	free(s->trace_v);
+	free(s);
+	return NULL;
+}
+
+void sched_destroy(struct sched *s)
+{
+	if (!s)
+		return;
+	sched_stop(s);
+	pthread_cond_destroy(&s->cond);
+	pthread_mutex_destroy(&s->lock);
+	pthread_mutex_destroy(&s->trace_lock);
+	free(s->trace_t);
+	free(s->trace_v);
+	free(s);
+}
+
+void sched_set_sampler(struct sched *s, unsigned n, const char *const *names,
+		       sched_sample_fn fn, void *arg)
+{
+	if (n > SCHED_MAX_LEVELS)
+		n = SCHED_MAX_LEVELS;
+	s->nlevels = n;
+	for (unsigned i = 0; i < n; i++)
+		s->level_name[i] = names[i];
+	s->sample = fn;
+	s->sample_arg = arg;
+}
+
+void sched_sample(struct sched *s)
+{
+	uint32_t v[SCHED_MAX_LEVELS] = { 0 };
+
+	if (!s->sample || !s->trace_cap)
+		return;
+	s->sample(s->sample_arg, v);
+	pthread_mutex_lock(&s->trace_lock);
+	if (s->trace_n < s->trace_cap) {
+		s->trace_t[s->trace_n] = sched_now_us() - s->t0;
+		memcpy(&s->trace_v[(size_t)s->trace_n * SCHED_MAX_LEVELS], v,
+		       sizeof(v));
+		s->trace_n++;
+	} else {
+		s->trace_dropped++;
+	}
+	pthread_mutex_unlock(&s->trace_lock);
+}
+
+int sched_trace_csv(const struct sched *s, FILE *f)
+{
+	if (fprintf(f, "t_us") < 0)
+		return -1;
+	for (unsigned i = 0; i < s->nlevels; i++)
+		fprintf(f, ",%s", s->level_name[i]);
+	fputc('\n', f);
+	for (uint32_t k = 0; k < s->trace_n; k++) {
+		fprintf(f, "%llu", (unsigned long long)s->trace_t[k]);
+		for (unsigned i = 0; i < s->nlevels; i++)
+			fprintf(f, ",%u",
+				s->trace_v[(size_t)k * SCHED_MAX_LEVELS + i]);
+		fputc('\n', f);
+	}
+	return ferror(f) ? -1 : 0;
+}
+
+/* Under s->lock: snapshot the task states and decide. */
+static struct sched_choice decide_locked(struct sched *s, uint64_t now)
+{
+	struct sched_pstate ps[SCHED_MAX_TASKS];
+	struct sched_dstate ds[SCHED_MAX_TASKS];
+
+	for (size_t i = 0; i < s->np; i++) {
+		struct task *t = &s->t[s->pidx[i]];
+		ps[i].prio = t->d.prio;
+		ps[i].ready = now >= t->next_release;
+		ps[i].running = t->running;
+	}
+	for (size_t i = 0; i < s->nd; i++) {
+		struct task *t = &s->t[s->didx[i]];
+		ds[i].order = t->d.order;
+		ds[i].running = t->running;
+		ds[i].last = t->last;
+		ds[i].ul = ds[i].dl = ds[i].dcap = 0;
+		if (!t->running)
+			t->d.levels(t->d.arg, &ds[i].ul, &ds[i].dl, &ds[i].dcap);
+	}
+	return sched_decide(s->policy, ps, s->np, ds, s->nd);
+}
+
+/* Under s->lock: mark the chosen task running; returns its index. */
+static int claim_locked(struct sched *s, struct sched_choice c, uint64_t now)
+{
+	int ti;
+
+	if (c.kind == SCHED_PERIODIC) {
+		ti = s->pidx[c.index];
+		struct task *t = &s->t[ti];
+		t->next_release += t->d.period_us;
+		if (t->next_release <= now) { /* missed releases */
+			t->overruns++;
+			t->next_release = now + t->d.period_us;
+		}
+	} else {
+		ti = s->didx[c.index];
+		s->t[ti].last = ++s->seq;
+	}
+	s->t[ti].running = true;
+	return ti;
+}
+
+static uint64_t next_release_locked(const struct sched *s)
+{
+	uint64_t nr = UINT64_MAX;
+
+	for (size_t i = 0; i < s->np; i++) {
+		const struct task *t = &s->t[s->pidx[i]];
+		if (!t->running && t->next_release < nr)
+			nr = t->next_release;
+	}
+	return nr;
+}
+
+struct sched_choice sched_step(struct sched *s)
+{
+	struct sched_choice c;
+	uint64_t now = sched_now_us();
+	int ti;
+
+	pthread_mutex_lock(&s->lock);
+	c = decide_locked(s, now);
+	if (c.kind == SCHED_IDLE) {
+		s->idle[0]++;
+		pthread_mutex_unlock(&s->lock);
+		return c;
+	}
+	ti = claim_locked(s, c, now);
+	pthread_mutex_unlock(&s->lock);
+
+	uint64_t b0 = now_ns();
+	uint32_t items = s->t[ti].d.run(s->t[ti].d.arg, 0);
+	uint64_t b1 = now_ns();
+
+	pthread_mutex_lock(&s->lock);
+	s->t[ti].busy_ns += b1 - b0;
+	s->t[ti].running = false;
+	s->t[ti].runs[0]++;
+	s->t[ti].items += items;
+	pthread_mutex_unlock(&s->lock);
+	return c;
+}
+
+static void *worker_main(void *arg)
+{
+	struct worker *w = arg;
+	struct sched *s = w->s;
+	int prev = -1;
+	uint32_t prev_items = 0;
+	uint64_t prev_ns = 0;
+
+	pthread_mutex_lock(&s->lock);
+	for (;;) {
+		if (prev >= 0) {
+			s->t[prev].running = false;
+			s->t[prev].runs[w->id]++;
+			s->t[prev].items += prev_items;
+			s->t[prev].busy_ns += prev_ns;
+			prev = -1;
+			if (atomic_load(&s->waiting) > 0)
+				pthread_cond_broadcast(&s->cond);
+		}
+		if (atomic_load(&s->stop))
+			break;
+		/* Announce that we may sleep before reading the queue levels,
+		 * so that a producer either sees us waiting or we see its data
+		 * (sched_kick pairs with this). */
+		atomic_fetch_add(&s->waiting, 1);
+		atomic_thread_fence(memory_order_seq_cst);
+		uint64_t now = sched_now_us();
+		struct sched_choice c = decide_locked(s, now);
+		if (c.kind == SCHED_IDLE) {
+			uint64_t wake = next_release_locked(s);
+			if (wake > now + 2000u)
+				wake = now + 2000u; /* safety poll */
+			struct timespec ts;
+			clock_gettime(CLOCK_MONOTONIC, &ts);
+			uint64_t ns = (uint64_t)ts.tv_nsec +
+				      (wake > now ? wake - now : 0) * 1000u;
+			ts.tv_sec += (time_t)(ns / 1000000000u);
+			ts.tv_nsec = (long)(ns % 1000000000u);
+			s->idle[w->id]++;
+			int rc = pthread_cond_timedwait(&s->cond, &s->lock, &ts);
+			(void)rc;
+			atomic_fetch_sub(&s->waiting, 1);
+			continue;
+		}
+		atomic_fetch_sub(&s->waiting, 1);
+		prev = claim_locked(s, c, now);
+		pthread_mutex_unlock(&s->lock);
+		uint64_t b0 = now_ns();
+		prev_items = s->t[prev].d.run(s->t[prev].d.arg, w->id);
+		prev_ns = now_ns() - b0;
+		pthread_mutex_lock(&s->lock);
+	}
+	pthread_mutex_unlock(&s->lock);
+	return NULL;
+}
+
+int sched_start(struct sched *s, unsigned workers)
+{
+	if (atomic_load(&s->started) || workers == 0 || workers > SCHED_MAX_WORKERS)
+		return -1;
+	atomic_store(&s->stop, false);
+	s->workers = workers;
+	atomic_store(&s->started, true);
+	uint64_t now = sched_now_us();
+	for (size_t i = 0; i < s->np; i++) {
+		struct task *t = &s->t[s->pidx[i]];
+		t->next_release = now + t->d.period_us;
+	}
+	for (unsigned i = 0; i < workers; i++) {
+		s->w[i].s = s;
+		s->w[i].id = i;
+		if (pthread_create(&s->w[i].th, NULL, worker_main, &s->w[i])) {
+			atomic_store(&s->stop, true);
+			pthread_mutex_lock(&s->lock);
+			pthread_cond_broadcast(&s->cond);
+			pthread_mutex_unlock(&s->lock);
+			for (unsigned k = 0; k < i; k++)
+				pthread_join(s->w[k].th, NULL);
+			atomic_store(&s->started, false);
+			s->workers = 0;
+			return -1;
+		}
+	}
+	return 0;
+}
+
+void sched_stop(struct sched *s)
+{
+	if (!atomic_load(&s->started))
+		return;
+	atomic_store(&s->stop, true);
+	pthread_mutex_lock(&s->lock);
+	pthread_cond_broadcast(&s->cond);
+	pthread_mutex_unlock(&s->lock);
+	for (unsigned i = 0; i < s->workers; i++)
+		pthread_join(s->w[i].th, NULL);
+	atomic_store(&s->started, false);
+}
+
+void sched_kick(struct sched *s)
+{
+	atomic_thread_fence(memory_order_seq_cst);
+	if (atomic_load(&s->started) && atomic_load(&s->waiting) > 0) {
+		pthread_mutex_lock(&s->lock);
+		pthread_cond_broadcast(&s->cond);
+		pthread_mutex_unlock(&s->lock);
+	}
+}
+
+void sched_get_stats(struct sched *s, struct sched_stats *st)
+{
+	memset(st, 0, sizeof(*st));
+	pthread_mutex_lock(&s->lock);
+	st->n_tasks = s->n;
+	st->workers = s->workers ? s->workers : 1;
+	for (size_t i = 0; i < s->n; i++) {
+		st->name[i] = s->t[i].d.name;
+		memcpy(st->runs[i], s->t[i].runs, sizeof(st->runs[i]));
+		st->items[i] = s->t[i].items;
+		st->overruns[i] = s->t[i].overruns;
+		st->busy_ns[i] = s->t[i].busy_ns;
+	}
+	memcpy(st->idle, s->idle, sizeof(st->idle));
+	st->decisions = s->seq;
+	pthread_mutex_unlock(&s->lock);
+}

@@ -1,0 +1,25 @@
+"""The benchmark runs in a tiny configuration and writes valid JSON (no
+timing assertions: the figures live in bench/results/motion.json)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from motion_helpers import require, run_binary
+
+
+def test_bench_tiny_writes_json(tmp_path: Path) -> None:
+    b = require("host")
+    out = tmp_path / "motion.json"
+    proc = run_binary(b, "motion_bench",
+                      ["--blocks", "300", "--arcs", "200", "--reps", "1", "--json", str(out)])
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    data = json.loads(out.read_text())
+    single = data["single_thread"]
+    assert single["blocks"] > 0 and single["blocks_per_s"] > 0
+    sched = data["scheduler"]
+    for key in ("hybrid_1", "hybrid_n", "fifo_1", "fifo_n"):
+        assert sched[key]["wall_s"] > 0
+    assert sched["speedup_hybrid_n_over_1"] > 0
+    assert abs(sum(sched["task_time_share"].values()) - 1.0) < 1e-3
+    assert "blocks/s" in proc.stdout
