@@ -63,15 +63,15 @@ void amp__rec_write(void *ocm_rec, const void *src, uint32_t words,
 
 	WR(&d[0], seq);
 	AMP_PORT_CACHE_CLEAN(d, 4u);
-	MB();
+	AMP_PORT_WMB();
 	for (uint32_t i = 1; i < words; i++)
 		if (i != end)
 			WR(&d[i], s[i]);
 	AMP_PORT_CACHE_CLEAN(d, words * 4u);
-	MB();
+	AMP_PORT_WMB();
 	WR(&d[end], seq);
 	AMP_PORT_CACHE_CLEAN(&d[end], 4u);
-	MB();
+	/* the caller publishes seq with a release store */
 }
 
 int amp__rec_read(void *dst, const void *ocm_rec, uint32_t words,
@@ -83,11 +83,11 @@ int amp__rec_read(void *dst, const void *ocm_rec, uint32_t words,
 
 	AMP_PORT_CACHE_INVAL(s, words * 4u);
 	e = RD(&s[end]);
-	MB();
+	AMP_PORT_RMB();
 	for (uint32_t i = 1; i < words; i++)
 		if (i != end)
 			d[i] = RD(&s[i]);
-	MB();
+	AMP_PORT_RMB();
 	AMP_PORT_CACHE_INVAL(s, 4u);
 	b = RD(&s[0]);
 	d[0] = b;

@@ -130,12 +130,11 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	o = l->ocm;
 	peer = amp_linux_peer(l);
 
-	/* 1. heartbeat (the caller has cleared its interrupt flag) */
+	/* 1. heartbeat (the caller has cleared its interrupt flag): counted
+	 * here, written with the publication in step 5 so that the line the
+	 * servo polls changes once per cycle */
 	l->cycle++;
 	l->st.cycles++;
-	WR(&o->linux_line.heartbeat, l->cycle);
-	WR(&o->linux_line.cycle, l->cycle);
-	AMP_PORT_CACHE_CLEAN(&o->linux_line, sizeof(o->linux_line));
 
 	/* 2. semaphore: still busy means the servo has not taken the last
 	 * commands (it is late or absent) */
@@ -165,6 +164,8 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		WR_REL(&o->cyc_sem.sem, AMP_SEM_BUSY);
 		AMP_PORT_CACHE_CLEAN(&o->cyc_sem, 4u);
 	}
+	WR(&o->linux_line.heartbeat, l->cycle);
+	WR(&o->linux_line.cycle, l->cycle);
 	WR_REL(&o->linux_line.cmd_pub, seq);
 	AMP_PORT_CACHE_CLEAN(&o->linux_line, sizeof(o->linux_line));
 	l->cmd_seq = seq;

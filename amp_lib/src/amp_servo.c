@@ -78,10 +78,11 @@ int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_i
 	uint32_t pub;
 	int wd;
 
-	/* 1. heartbeat (the caller has cleared its interrupt flag) */
+	/* 1. the cycle is counted (the caller has cleared its interrupt
+	 * flag); the heartbeat goes out with the feedback in cycle_tx, or by
+	 * amp_servo_heartbeat in a cycle without exchange */
 	s->cycle++;
 	s->st.cycles++;
-	amp_servo_heartbeat(s);
 	rx->status = AMP_RX_STALE;
 	rx->missed = 0;
 	rx->seq = s->cmd_seq;
@@ -157,6 +158,7 @@ int amp_servo_cycle_tx(struct amp_servo *s, const struct amp_fb_axis *axes,
 		f.axis[i] = axes[i];
 	seq = s->fb_seq + 1u;
 	amp__rec_write(&o->fb[seq & 1u], &f, FB_WORDS, FB_END, seq);
+	WR(&o->servo_line.heartbeat, ++s->heartbeat);
 	WR_REL(&o->servo_line.fb_pub, seq);
 	AMP_PORT_CACHE_CLEAN(&o->servo_line, sizeof(o->servo_line));
 	s->fb_seq = seq;

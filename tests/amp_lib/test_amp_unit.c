@@ -340,8 +340,12 @@ static void test_watchdogs_both_ways(void)
 		;
 	CHECK_EQ(rc, AMP_E_STALLED);
 	CHECK_EQ(n, 1 + 4);
-	/* servo resumes */
+	/* servo resumes: its heartbeat goes out with the feedback */
 	CHECK_EQ(amp_servo_cycle_rx(&S, 0, &rx), AMP_OK);
+	CHECK_EQ(amp_servo_cycle_tx(&S, f, 1, 0, 0), AMP_OK);
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+	/* a cycle without exchange still beats through amp_servo_heartbeat */
+	amp_servo_heartbeat(&S);
 	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
 	/* Linux stalls: the servo detects it at exactly the limit */
 	for (n = 1; n <= 10 && (rc = amp_servo_cycle_rx(&S, 0, &rx)) == AMP_OK; n++)
@@ -350,6 +354,8 @@ static void test_watchdogs_both_ways(void)
 	CHECK_EQ(n, 1 + 4);
 	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
 	CHECK_EQ(amp_servo_cycle_rx(&S, 0, &rx), AMP_OK);
+	CHECK_EQ(amp_servo_cycle_tx(&S, f, 1, 0, 0), AMP_OK);
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
 
 	/* the servo restarts in the same epoch: sequences continue, the
 	 * restart is counted, Linux re-primes its watchdog */

@@ -8,8 +8,10 @@
  *   AMP_PORT_STORE32(p, v)      32-bit store to shared memory, not elided
  *   AMP_PORT_MB()               full barrier between the cores (both
  *                               directions; orders shared-memory accesses)
- *   AMP_PORT_LOAD_ACQ(p)        optional: load + MB (semaphores, sequences)
- *   AMP_PORT_STORE_REL(p, v)    optional: MB + store
+ *   AMP_PORT_RMB(), AMP_PORT_WMB()  optional: load-load / store-store
+ *                               ordering only (default: AMP_PORT_MB)
+ *   AMP_PORT_LOAD_ACQ(p)        optional: load + RMB (semaphores, sequences)
+ *   AMP_PORT_STORE_REL(p, v)    optional: MB + store + WMB
  *   AMP_PORT_CACHE_CLEAN(a, n)  write back lines [a, a+n) (if cached)
  *   AMP_PORT_CACHE_INVAL(a, n)  discard lines [a, a+n) (if cached)
  *   AMP_PORT_RELAX()            pause inside a polling loop
@@ -31,19 +33,26 @@ typedef uint32_t amp_ticks_t;
 
 #include "amp_port_impl.h"
 
+#ifndef AMP_PORT_RMB
+#define AMP_PORT_RMB() AMP_PORT_MB()
+#endif
+#ifndef AMP_PORT_WMB
+#define AMP_PORT_WMB() AMP_PORT_MB()
+#endif
+
 #ifndef AMP_PORT_LOAD_ACQ
 static inline uint32_t amp_port__load_acq(const uint32_t *p)
 {
 	uint32_t v = AMP_PORT_LOAD32(p);
 
-	AMP_PORT_MB();
+	AMP_PORT_RMB();
 	return v;
 }
 #define AMP_PORT_LOAD_ACQ(p) amp_port__load_acq(p)
 #endif
 
 #ifndef AMP_PORT_STORE_REL
-#define AMP_PORT_STORE_REL(p, v) do { AMP_PORT_MB(); AMP_PORT_STORE32((p), (v)); AMP_PORT_MB(); } while (0)
+#define AMP_PORT_STORE_REL(p, v) do { AMP_PORT_MB(); AMP_PORT_STORE32((p), (v)); AMP_PORT_WMB(); } while (0)
 #endif
 
 #ifndef AMP_PORT_SIGNAL

@@ -27,6 +27,7 @@ uint32_t amp_board_ticks(void);
 #define AMP_PORT_LOAD32(p)     (*(const volatile uint32_t *)(p))
 #define AMP_PORT_STORE32(p, v) (*(volatile uint32_t *)(p) = (uint32_t)(v))
 #define AMP_PORT_MB()          __asm__ volatile("dmb sy" ::: "memory")
+#define AMP_PORT_WMB()         __asm__ volatile("dmb st" ::: "memory")
 #define AMP_PORT_RELAX()       __asm__ volatile("nop" ::: "memory")
 #define AMP_PORT_SIGNAL()      __asm__ volatile("dsb sy\n\tsev" ::: "memory")
 #define AMP_PORT_TICKS_PER_US  (AMP_BOARD_TICKS_PER_US)

@@ -14,15 +14,15 @@
 
 #define AMP_PORT_LOAD32(p)     __atomic_load_n((p), __ATOMIC_RELAXED)
 #define AMP_PORT_STORE32(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
-/* Semaphore and publication words: sequentially consistent. */
-#define AMP_PORT_LOAD_ACQ(p)     __atomic_load_n((p), __ATOMIC_SEQ_CST)
-#define AMP_PORT_STORE_REL(p, v) __atomic_store_n((p), (v), __ATOMIC_SEQ_CST)
 
 #if defined(__arm__)
 #define AMP_PORT_MB()    __asm__ volatile("dmb sy" ::: "memory")
+#define AMP_PORT_WMB()   __asm__ volatile("dmb st" ::: "memory")
 #define AMP_PORT_RELAX() __asm__ volatile("yield" ::: "memory")
 #elif defined(__aarch64__)
 #define AMP_PORT_MB()    __asm__ volatile("dmb sy" ::: "memory")
+#define AMP_PORT_RMB()   __asm__ volatile("dmb ld" ::: "memory")
+#define AMP_PORT_WMB()   __asm__ volatile("dmb st" ::: "memory")
 #define AMP_PORT_RELAX() __asm__ volatile("yield" ::: "memory")
 #else
 #define AMP_PORT_MB()    __atomic_thread_fence(__ATOMIC_SEQ_CST)

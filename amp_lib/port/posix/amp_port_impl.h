@@ -12,16 +12,20 @@
 
 #define AMP_PORT_LOAD32(p)     __atomic_load_n((p), __ATOMIC_RELAXED)
 #define AMP_PORT_STORE32(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
-/* Semaphore and publication words: sequentially consistent. */
-#define AMP_PORT_LOAD_ACQ(p)     __atomic_load_n((p), __ATOMIC_SEQ_CST)
-#define AMP_PORT_STORE_REL(p, v) __atomic_store_n((p), (v), __ATOMIC_SEQ_CST)
+/* Semaphore and publication words: acquire / release. */
+#define AMP_PORT_LOAD_ACQ(p)     __atomic_load_n((p), __ATOMIC_ACQUIRE)
+#define AMP_PORT_STORE_REL(p, v) __atomic_store_n((p), (v), __ATOMIC_RELEASE)
 #if defined(__SANITIZE_THREAD__)
 /* ThreadSanitizer does not model fences: use a locked RMW (a full barrier
  * on x86) that it understands. Every shared access is atomic anyway. */
 static uint32_t amp_port__tsan_fence __attribute__((unused));
 #define AMP_PORT_MB() ((void)__atomic_fetch_add(&amp_port__tsan_fence, 0u, __ATOMIC_SEQ_CST))
+#define AMP_PORT_RMB() AMP_PORT_MB()
+#define AMP_PORT_WMB() AMP_PORT_MB()
 #else
 #define AMP_PORT_MB()          __atomic_thread_fence(__ATOMIC_SEQ_CST)
+#define AMP_PORT_RMB()         __atomic_thread_fence(__ATOMIC_ACQUIRE)
+#define AMP_PORT_WMB()         __atomic_thread_fence(__ATOMIC_RELEASE)
 #endif
 #define AMP_PORT_CACHE_CLEAN(a, n) ((void)(a), (void)(n))
 #define AMP_PORT_CACHE_INVAL(a, n) ((void)(a), (void)(n))

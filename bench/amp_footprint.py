@@ -1,0 +1,95 @@
+#!/usr/bin/env python3
+"""Footprint of the servo-side amp_lib on the servo cores.
+
+Builds amp_common.c + amp_servo.c with arm-none-eabi-gcc -Os for the
+bare-metal port, links them with --gc-sections keeping only the servo API
+(what a firmware links), and prints .text/.data/.bss per target; writes
+bench/results/footprint.json. Targets: Cortex-A9 (ARM and Thumb-2) and
+Cortex-R5 (Thumb-2). Budget: 2,048 B of code, 64 B of data+bss.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+TOP = Path(__file__).resolve().parent.parent
+SOURCES = ["amp_common.c", "amp_servo.c"]
+SERVO_API = [
+    "amp_servo_attach", "amp_servo_heartbeat", "amp_servo_set_state",
+    "amp_servo_cycle_rx", "amp_servo_cycle_tx", "amp_servo_mbox_poll",
+    "amp_servo_mbox_respond",
+]
+TARGETS = {
+    "cortex-a9-thumb2": ["-mcpu=cortex-a9", "-mthumb"],
+    "cortex-a9-arm": ["-mcpu=cortex-a9", "-marm"],
+    "cortex-r5-thumb2": ["-mcpu=cortex-r5", "-mthumb"],
+}
+BUDGET_CODE = 2048
+BUDGET_DATA = 64
+
+
+def build(target: str, flags: list[str], work: Path, cc: str) -> dict[str, int]:
+    objs = []
+    for src in SOURCES:
+        obj = work / f"{target}-{src}.o"
+        subprocess.run(
+            [cc, *flags, "-mfloat-abi=soft", "-std=c11", "-Os", "-Wall", "-Wextra", "-Werror",
+             "-ffreestanding", "-ffunction-sections", "-fdata-sections",
+             "-DAMP_BOARD_TICKS_PER_US=100",
+             f"-I{TOP}/amp_lib/include", f"-I{TOP}/amp_lib/src",
+             f"-I{TOP}/amp_lib/port/baremetal-armv7",
+             "-c", str(TOP / "amp_lib" / "src" / src), "-o", str(obj)],
+            check=True)
+        objs.append(str(obj))
+    elf = work / f"{target}.elf"
+    keep = [f"-Wl,-u,{s}" for s in SERVO_API]
+    # memcpy/memset are the firmware's; left unresolved on purpose
+    subprocess.run(
+        [cc, *flags, "-nostdlib", "-Wl,--gc-sections", f"-Wl,-e,{SERVO_API[0]}", *keep,
+         "-Wl,--unresolved-symbols=ignore-all", "-o", str(elf), *objs],
+        check=True)
+    out = subprocess.run([cc.replace("gcc", "size"), "-A", str(elf)],
+                         check=True, capture_output=True, text=True).stdout
+    sizes = {"text": 0, "rodata": 0, "data": 0, "bss": 0}
+    for line in out.splitlines():
+        parts = line.split()
+        if len(parts) >= 2 and parts[0].startswith("."):
+            name, size = parts[0], int(parts[1])
+            for key in sizes:
+                if name == f".{key}" or name.startswith(f".{key}."):
+                    sizes[key] += size
+    sizes["code"] = sizes["text"] + sizes["rodata"]
+    return sizes
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cc", default="arm-none-eabi-gcc")
+    ap.add_argument("--json", default=str(TOP / "bench" / "results" / "footprint.json"))
+    args = ap.parse_args()
+    results: dict[str, dict[str, int]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for target, flags in TARGETS.items():
+            results[target] = build(target, flags, Path(tmp), args.cc)
+    print(f"servo-side amp_lib footprint (arm-none-eabi-gcc -Os, --gc-sections), "
+          f"budget {BUDGET_CODE} B code, {BUDGET_DATA} B data+bss")
+    print(f"{'target':<18} {'.text':>6} {'.rodata':>8} {'code':>6} {'.data':>6} {'.bss':>6}")
+    for target, s in results.items():
+        print(f"{target:<18} {s['text']:>6} {s['rodata']:>8} {s['code']:>6} {s['data']:>6} {s['bss']:>6}")
+    print("reference: RPMsg-Lite static API 2,926 B flash, 352 B RAM")
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(
+        {"compiler": args.cc, "flags": "-Os -ffunction-sections -Wl,--gc-sections",
+         "budget": {"code": BUDGET_CODE, "data_bss": BUDGET_DATA},
+         "targets": results}, indent=2) + "\n")
+    print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

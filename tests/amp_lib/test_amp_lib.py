@@ -1,0 +1,111 @@
+"""amp_lib on the host: unit tests, the two-process stress test and the
+watchdog test, under the plain build and under sanitizers; the servo-side
+footprint budget; the transport benchmark runs (figures are not judged)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+TOP = Path(__file__).resolve().parents[2]
+BUILD = TOP / "build" / "amp_lib"
+
+
+def _make(san: str, *targets: str) -> Path:
+    subprocess.run(["make", "-s", "-C", str(TOP / "amp_lib"), f"SAN={san}", *targets],
+                   check=True)
+    return BUILD / san
+
+
+@pytest.fixture(scope="session")
+def build_none() -> Path:
+    return _make("none", "all", "bench")
+
+
+@pytest.fixture(scope="session")
+def build_asan() -> Path:
+    return _make("asan", "all")
+
+
+@pytest.fixture(scope="session")
+def build_tsan() -> Path:
+    return _make("tsan", "all")
+
+
+def _run(cmd: list[str], timeout: int) -> str:
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    out = proc.stdout + proc.stderr
+    print(out)
+    assert proc.returncode == 0, out
+    assert "runtime error" not in out and "Sanitizer" not in out, out
+    return out
+
+
+@pytest.mark.parametrize("variant", ["none", "asan", "tsan"])
+def test_unit(variant: str, request: pytest.FixtureRequest) -> None:
+    build = request.getfixturevalue(f"build_{variant}")
+    out = _run([str(build / "test_amp_unit")], timeout=120)
+    assert " 0 failed" in out
+
+
+@pytest.mark.slow
+def test_stress_two_processes_10m_cycles_1m_mailbox(build_none: Path) -> None:
+    out = _run([str(build_none / "amp_stress"), "lockstep",
+                "--cycles", "10000000", "--mbox", "1000000"], timeout=1800)
+    assert "OK: 10000000 periodic exchanges and 1000000 mailbox transactions" in out
+
+
+@pytest.mark.slow
+def test_stress_two_processes_asan_ubsan(build_asan: Path) -> None:
+    out = _run([str(build_asan / "amp_stress"), "lockstep",
+                "--cycles", "1000000", "--mbox", "100000", "--seed", "99"], timeout=1200)
+    assert "OK: 1000000 periodic exchanges" in out
+
+
+@pytest.mark.slow
+def test_stress_two_threads_tsan(build_tsan: Path) -> None:
+    out = _run([str(build_tsan / "amp_stress"), "lockstep", "--threads",
+                "--cycles", "200000", "--mbox", "20000", "--seed", "7"], timeout=1200)
+    assert "OK: 200000 periodic exchanges" in out
+    assert "WARNING: ThreadSanitizer" not in out
+
+
+@pytest.mark.parametrize("variant", ["none", "asan"])
+def test_watchdog_pause_and_kill_detected(variant: str, request: pytest.FixtureRequest) -> None:
+    build = request.getfixturevalue(f"build_{variant}")
+    out = _run([str(build / "amp_stress"), "watchdog", "--period-us", "1000",
+                "--limit", "20", "--ticks", "1500"], timeout=120)
+    assert "OK: stalls detected within the limit, no false detection" in out
+
+
+def test_stress_rejects_bad_parameters(build_none: Path) -> None:
+    proc = subprocess.run([str(build_none / "amp_stress"), "lockstep", "--axes", "99"],
+                          capture_output=True, text=True, timeout=30)
+    assert proc.returncode == 2 and "bad parameters" in proc.stderr
+
+
+def test_servo_footprint_within_budget(tmp_path: Path) -> None:
+    out_json = tmp_path / "footprint.json"
+    subprocess.run([sys.executable, str(TOP / "bench" / "amp_footprint.py"),
+                    "--json", str(out_json)], check=True, timeout=300)
+    data = json.loads(out_json.read_text())
+    for target in ("cortex-a9-thumb2", "cortex-r5-thumb2"):
+        t = data["targets"][target]
+        assert 0 < t["code"] <= 2048, (target, t)
+        assert t["data"] + t["bss"] <= 64, (target, t)
+
+
+def test_transport_bench_runs_and_writes_json(build_none: Path, tmp_path: Path) -> None:
+    out_json = tmp_path / "transport.json"
+    _run([str(build_none / "transport_bench"), "--iters", "2000", "--json", str(out_json)],
+         timeout=300)
+    data = json.loads(out_json.read_text())
+    for key in ("a_amp_periodic", "b_amp_mailbox_16", "b_amp_mailbox_512",
+                "c_cacheline_pingpong", "d_eventfd", "e_pipe"):
+        lat = data["latency"][key]
+        assert 0 < lat["p50"] <= lat["p99"] <= lat["p99_9"] <= lat["max"], (key, lat)
+    assert set(data["ratios"]) >= {"a_over_c_p50", "a_over_c_p99_9", "d_over_a_p50"}
