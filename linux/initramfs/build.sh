@@ -1,0 +1,143 @@
+#!/usr/bin/env bash
+# Build the servoamp initramfs (gzip'ed newc cpio) for the Zynq-7000 guest.
+#
+#   linux/initramfs/build.sh [--module KO] [--firmware FILE]... [--print]
+#
+# Contents: Debian's busybox-static:armhf as the whole userland, /init
+# (init.sh: mounts proc, sys, devtmpfs, debugfs, loads the remoteproc module,
+# runs a shell on the console ttyPS0), the module given with --module in
+# /lib/modules/, and every --firmware file in /lib/firmware/ (same name).
+#
+# busybox-static:armhf comes from the machine's own Debian mirror through a
+# PRIVATE apt configuration (own sources list, state and cache directories;
+# never `dpkg --add-architecture`). The mirror URI is read from
+# /etc/apt/sources.list.d/*.sources, so no host name is written anywhere in
+# the repository.
+#
+# The archive is built with the kernel's own gen_init_cpio (no root needed
+# for /dev/console) and cached under
+# ${SERVOAMP_CACHE:-$HOME/.cache/servoamp}/initramfs/<key>/ where key hashes
+# every input (busybox .deb, init.sh, this script, module, firmware files).
+# build/initramfs.cpio.gz links to the current one.
+set -euo pipefail
+
+here=$(cd "$(dirname "$0")" && pwd)
+repo=$(cd "$here/../.." && pwd)
+cache=${SERVOAMP_CACHE:-$HOME/.cache/servoamp}
+module=""
+firmware=()
+print=0
+
+log() { printf '[initramfs] %s\n' "$*" >&2; }
+die() { printf '[initramfs] error: %s\n' "$*" >&2; exit 1; }
+
+while [ $# -gt 0 ]; do
+	case $1 in
+	--module) module=$(realpath "$2"); shift 2 ;;
+	--firmware) firmware+=("$(realpath "$2")"); shift 2 ;;
+	--print) print=1; shift ;;
+	*) die "unknown argument: $1" ;;
+	esac
+done
+[ -z "$module" ] || [ -f "$module" ] || die "module $module not found"
+for f in "${firmware[@]}"; do [ -f "$f" ] || die "firmware $f not found"; done
+
+gen_init_cpio=$repo/build/kernel/obj/usr/gen_init_cpio
+[ -x "$gen_init_cpio" ] || die "$gen_init_cpio missing: run linux/kernel/build.sh first"
+
+debian_mirror() {
+	local f uri=""
+	for f in /etc/apt/sources.list.d/*.sources; do
+		[ -r "$f" ] || continue
+		uri=$(awk '/^URIs:/ { for (i = 2; i <= NF; i++) if ($i !~ /security/) { print $i; exit } }' "$f")
+		[ -n "$uri" ] && break
+	done
+	if [ -z "$uri" ] && [ -r /etc/apt/sources.list ]; then
+		uri=$(awk '$1 == "deb" && $0 !~ /security/ { for (i = 2; i <= NF; i++) if ($i ~ /^[a-z]+:\/\//) { print $i; exit } }' /etc/apt/sources.list)
+	fi
+	[ -n "$uri" ] || die "cannot find the Debian mirror in /etc/apt"
+	printf '%s\n' "${uri%/}"
+}
+
+# 1. busybox-static:armhf, downloaded once.
+bbdir=$cache/initramfs/busybox
+mkdir -p "$bbdir"
+exec 9>"$bbdir/.lock"
+flock 9
+deb=$(ls "$bbdir"/busybox-static_*_armhf.deb 2>/dev/null | tail -1 || true)
+if [ -z "$deb" ]; then
+	apt_root=$bbdir/apt
+	mkdir -p "$apt_root/lists/partial" "$apt_root/cache/archives/partial" "$apt_root/etc/preferences.d"
+	echo "deb [arch=armhf] $(debian_mirror) bookworm main" >"$apt_root/etc/sources.list"
+	: >"$apt_root/status"
+	apt_opts=(
+		-o "Dir::Etc::SourceList=$apt_root/etc/sources.list"
+		-o "Dir::Etc::SourceParts=-"
+		-o "Dir::Etc::PreferencesParts=$apt_root/etc/preferences.d"
+		-o "Dir::State::Lists=$apt_root/lists"
+		-o "Dir::State::Status=$apt_root/status"
+		-o "Dir::Cache=$apt_root/cache"
+		-o "APT::Architecture=armhf"
+		-o "APT::Architectures::=armhf"
+		-o "Debug::NoLocking=1"
+		-o "APT::Sandbox::User=root"
+	)
+	log "downloading busybox-static:armhf with a private apt configuration"
+	apt-get "${apt_opts[@]}" -qq update
+	(cd "$bbdir" && apt-get "${apt_opts[@]}" -qq download busybox-static:armhf)
+	deb=$(ls "$bbdir"/busybox-static_*_armhf.deb | tail -1)
+	rm -rf "$apt_root"
+fi
+flock -u 9
+
+# 2. Cache key over every input.
+key=$({
+	sha256sum "$deb" "$here/init.sh" "$0" | cut -d' ' -f1
+	[ -z "$module" ] || printf '%s %s\n' "$(sha256sum <"$module")" "$(basename "$module")"
+	for f in "${firmware[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
+} | sha256sum | cut -c1-16)
+out=$cache/initramfs/$key
+image=$out/initramfs.cpio.gz
+
+publish() {
+	mkdir -p "$repo/build"
+	ln -sfn "$image" "$repo/build/initramfs.cpio.gz"
+	[ $print -eq 0 ] || printf '%s\n' "$image"
+	return 0
+}
+
+if [ -f "$image" ]; then
+	log "cached: $image"
+	publish
+	exit 0
+fi
+
+# 3. Staging tree and gen_init_cpio list.
+stage=$(mktemp -d)
+trap 'rm -rf "$stage"' EXIT
+dpkg-deb -x "$deb" "$stage/deb"
+bb=$stage/deb/bin/busybox
+[ -f "$bb" ] || die "no bin/busybox in $deb"
+list=$stage/list
+{
+	for d in /bin /sbin /dev /proc /sys /tmp /root /etc /lib /lib/modules \
+		/lib/firmware /usr /usr/bin /usr/sbin /var /run; do
+		echo "dir $d 755 0 0"
+	done
+	echo "nod /dev/console 600 0 0 c 5 1"
+	echo "nod /dev/null 666 0 0 c 1 3"
+	echo "file /bin/busybox $bb 755 0 0"
+	echo "slink /bin/sh busybox 777 0 0"
+	echo "file /init $here/init.sh 755 0 0"
+	[ -z "$module" ] || echo "file /lib/modules/$(basename "$module") $module 644 0 0"
+	for f in "${firmware[@]}"; do
+		echo "file /lib/firmware/$(basename "$f") $f 644 0 0"
+	done
+} >"$list"
+
+mkdir -p "$out"
+"$gen_init_cpio" "$list" | gzip -9n >"$image.tmp"
+mv "$image.tmp" "$image"
+cp "$list" "$out/list"
+log "built $image ($(stat -c %s "$image") bytes, busybox $(basename "$deb"))"
+publish

@@ -1,0 +1,704 @@
+"""Launch the emulated servoamp board in QEMU and talk to it.
+
+The board's numbers come from ``boards/<board>/board.yaml`` (load addresses,
+memory map, QEMU machine). This module
+
+* builds what the launch needs and is cheap (boot stub, DTB with the
+  initramfs location in /chosen) and, through :func:`prepare_images`, runs
+  the cached build scripts for the rest (kernel, remoteproc module, test
+  firmware, initramfs);
+* starts QEMU with both CPUs pointed at the boot stub (``-device loader``;
+  ``-kernel`` cannot boot this two-core machine), each UART connected to a
+  TCP socket on 127.0.0.1 that this process listens on (QEMU connects as
+  the client, so no port is ever guessed) and QMP on a unix socket;
+* offers :class:`Uart` (wait for a line or a prompt, write a line) and
+  :meth:`QemuMachine.hmp` / :meth:`QemuMachine.read_word` (monitor commands
+  such as ``xp /1wx 0xffff8004``), with timeouts everywhere;
+* shuts QEMU down cleanly (QMP ``quit``, then SIGTERM, then SIGKILL) and
+  keeps the run directory (UART logs, QEMU stderr, command line) when
+  something failed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml  # type: ignore[import-untyped]
+
+REPO = Path(__file__).resolve().parents[2]
+ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b[()][A-Za-z0-9]")
+
+
+class QemuError(RuntimeError):
+    """QEMU could not be started, or a wait on the board timed out."""
+
+
+def _log(msg: str) -> None:
+    print(f"[qemu] {msg}", flush=True)
+
+
+# --------------------------------------------------------------------------
+# Board description
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Board:
+    """A board folder with its ``board.yaml``."""
+
+    name: str
+    folder: Path
+    data: dict[str, Any]
+
+    @classmethod
+    def load(cls, name_or_path: str | Path = "zynq7000_qemu") -> Board:
+        path = Path(name_or_path)
+        if not path.exists():
+            path = REPO / "boards" / str(name_or_path)
+        if path.is_dir():
+            path = path / "board.yaml"
+        data = yaml.safe_load(path.read_text())
+        if not isinstance(data, dict):
+            raise QemuError(f"{path}: not a mapping")
+        return cls(name=str(data["name"]), folder=path.parent, data=data)
+
+    def addr(self, *keys: str) -> int:
+        """A number from the board file, e.g. ``addr("load", "zimage")``."""
+        node: Any = self.data
+        for k in keys:
+            node = node[k]
+        if not isinstance(node, int):
+            raise QemuError(f"board {self.name}: {'.'.join(keys)} is not a number")
+        return node
+
+    @property
+    def qemu(self) -> dict[str, Any]:
+        q = self.data["qemu"]
+        assert isinstance(q, dict)
+        return q
+
+    @property
+    def build_dir(self) -> Path:
+        return REPO / "build" / "boards" / self.name
+
+
+# --------------------------------------------------------------------------
+# Images
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Images:
+    """Everything QEMU loads."""
+
+    stub: Path
+    zimage: Path
+    dtb: Path
+    initramfs: Path
+    firmware: tuple[Path, ...] = ()
+
+
+def _run(cmd: Sequence[str | Path], **kw: Any) -> subprocess.CompletedProcess[str]:
+    res = subprocess.run([str(c) for c in cmd], text=True, capture_output=True, **kw)
+    if res.returncode != 0:
+        raise QemuError(
+            f"command failed ({res.returncode}): {' '.join(map(str, cmd))}\n"
+            f"{res.stdout[-3000:]}{res.stderr[-3000:]}"
+        )
+    return res
+
+
+def kernel_dir() -> Path:
+    """The kernel build (``build/kernel`` -> cache), built if missing."""
+    link = REPO / "build" / "kernel"
+    if not (link / "ok").exists():
+        subprocess.run([REPO / "linux/kernel/build.sh"], check=True)
+    return link.resolve()
+
+
+def kernel_source(kdir: Path) -> Path:
+    for line in (kdir / "info").read_text().splitlines():
+        if line.startswith("src="):
+            return Path(line[4:])
+    raise QemuError(f"{kdir}/info has no src=")
+
+
+def build_stub(board: Board) -> Path:
+    """Assemble the boot stub with the board's addresses."""
+    out = board.build_dir
+    park = board.addr("load", "park_loop") - board.addr("load", "boot_stub")
+    _run(
+        [
+            "make", "-s", "-C", board.folder / "boot", f"OUT={out}",
+            f"STUB_ADDR={board.addr('load', 'boot_stub'):#x}",
+            f"ZIMAGE_ADDR={board.addr('load', 'zimage'):#x}",
+            f"DTB_ADDR={board.addr('load', 'dtb'):#x}",
+            f"ARM_PLL_CTRL_VALUE={board.addr('slcr', 'arm_pll_ctrl'):#x}",
+            f"PARK_OFFSET={park:#x}",
+        ]
+    )
+    return out / "stub.bin"
+
+
+def build_dtb(board: Board, ksrc: Path, initramfs: Path | None = None) -> Path:
+    """cpp + dtc on the board's Linux DTS (warnings are errors), then put the
+    initramfs location into /chosen."""
+    out = board.build_dir
+    out.mkdir(parents=True, exist_ok=True)
+    dts = board.folder / str(board.data["linux"]["dts"])
+    pre = out / "linux.dts.pp"
+    dtb = out / "linux.dtb"
+    _run(
+        [
+            "cpp", "-nostdinc", "-undef", "-x", "assembler-with-cpp", "-D__DTS__",
+            "-I", ksrc / "include", "-I", ksrc / "arch/arm/boot/dts",
+            "-I", REPO / "devicetree", "-o", pre, dts,
+        ]
+    )
+    res = _run(["dtc", "-I", "dts", "-O", "dtb", "-o", dtb, pre])
+    if res.stderr.strip():
+        raise QemuError(f"dtc warnings on {dts}:\n{res.stderr}")
+    if initramfs is not None:
+        start = board.addr("load", "initramfs")
+        end = start + initramfs.stat().st_size
+        _run(["fdtput", "-t", "x", dtb, "/chosen", "linux,initrd-start", f"{start:x}"])
+        _run(["fdtput", "-t", "x", dtb, "/chosen", "linux,initrd-end", f"{end:x}"])
+    return dtb
+
+
+def build_module(kdir: Path) -> Path:
+    """The out-of-tree remoteproc module (about 1 s)."""
+    key = next(l[4:] for l in (kdir / "info").read_text().splitlines() if l.startswith("key="))
+    out = REPO / "build/linux/remoteproc" / key
+    _run(["make", "-s", "-C", REPO / "linux/remoteproc", f"KDIR={kdir / 'obj'}", f"BUILD={out}"])
+    return out / "zynq_servo_rproc.ko"
+
+
+def build_test_firmware() -> list[Path]:
+    """The test firmware of tests/robot/fixtures (good and bad images)."""
+    out = REPO / "build/tests/fixtures"
+    _run(["make", "-s", "-C", REPO / "tests/robot/fixtures", f"OUT={out}"])
+    return sorted(out.glob("*.elf"))
+
+
+# rpu_app's outputs (rpu_app/Makefile) and the names they get in the guest's
+# /lib/firmware: "rpu_app*.elf" names the firmware, where "servo.elf" would not.
+RPU_APP_IMAGES = {"servo.elf": "rpu_app.elf", "servo-norsc.elf": "rpu_app-norsc.elf"}
+
+
+def rpu_app_firmware(board: Board, build: bool = True) -> list[Path]:
+    """rpu_app's ELFs for ``board``, built with rpu_app's Makefile when it
+    has one, staged under their /lib/firmware names. Empty when rpu_app
+    has not been written yet."""
+    mk = REPO / "rpu_app" / "Makefile"
+    if build and mk.exists():
+        _run(["make", "-s", "-C", REPO / "rpu_app", "-j2", f"BOARD={board.name}"])
+    src_dir = REPO / "build" / "rpu_app" / board.name
+    stage = REPO / "build" / "firmware" / board.name
+    found = []
+    for src, name in RPU_APP_IMAGES.items():
+        if (src_dir / src).exists():
+            stage.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(src_dir / src, stage / name)
+            found.append(stage / name)
+    return found
+
+
+def build_initramfs(module: Path, firmware: Sequence[Path]) -> Path:
+    cmd: list[str | Path] = [REPO / "linux/initramfs/build.sh", "--print", "--module", module]
+    for f in firmware:
+        cmd += ["--firmware", f]
+    res = subprocess.run([str(c) for c in cmd], text=True, stdout=subprocess.PIPE, check=True)
+    return Path(res.stdout.strip().splitlines()[-1])
+
+
+def prepare_images(
+    board: Board, firmware: Sequence[Path] | None = None, with_rpu_app: bool = True
+) -> Images:
+    """Build (or take from the caches) every image of a boot.
+
+    ``firmware``: ELF files for /lib/firmware; default: the test fixtures
+    plus rpu_app's ELF(s) when they exist.
+    """
+    kdir = kernel_dir()
+    module = build_module(kdir)
+    if firmware is None:
+        firmware = build_test_firmware()
+        if with_rpu_app:
+            firmware = list(firmware) + rpu_app_firmware(board)
+    initramfs = build_initramfs(module, firmware)
+    stub = build_stub(board)
+    dtb = build_dtb(board, kernel_source(kdir), initramfs)
+    return Images(
+        stub=stub, zimage=kdir / "zImage", dtb=dtb, initramfs=initramfs, firmware=tuple(firmware)
+    )
+
+
+# --------------------------------------------------------------------------
+# QEMU command line
+# --------------------------------------------------------------------------
+
+
+def check_qemu(board: Board) -> str:
+    """Path of the QEMU binary; refuses versions older than the board needs."""
+    binary = shutil.which(str(board.qemu["binary"]))
+    if not binary:
+        raise QemuError(f"{board.qemu['binary']} not found: run scripts/bootstrap.sh")
+    out = _run([binary, "--version"]).stdout
+    m = re.search(r"version (\d+)\.(\d+)", out)
+    want = tuple(int(x) for x in str(board.qemu["min_version"]).split("."))
+    if not m or (int(m.group(1)), int(m.group(2))) < want:
+        raise QemuError(f"{binary}: QEMU >= {board.qemu['min_version']} needed, got: {out.splitlines()[0]}")
+    return binary
+
+
+def qemu_args(board: Board, images: Images, serials: Sequence[str], accel: str | None = None) -> list[str]:
+    """The QEMU arguments (without the binary) for a boot of ``board``.
+
+    ``serials``: one ``-serial`` value per UART, in board order.
+    """
+    q = board.qemu
+    stub = board.addr("load", "boot_stub")
+    args = [
+        "-M", str(q["machine"]), "-smp", str(q["smp"]), "-m", str(q["memory"]),
+        "-display", "none", "-nodefaults",
+    ]
+    if accel:
+        args += ["-accel", accel]
+    for s in serials:
+        args += ["-serial", s]
+    loads = [
+        (images.stub, stub),
+        (images.zimage, board.addr("load", "zimage")),
+        (images.dtb, board.addr("load", "dtb")),
+        (images.initramfs, board.addr("load", "initramfs")),
+    ]
+    for f, a in loads:
+        args += ["-device", f"loader,file={f},addr={a:#x},force-raw=on"]
+    for cpu in range(int(q["smp"])):
+        args += ["-device", f"loader,addr={stub:#x},cpu-num={cpu}"]
+    return args
+
+
+# --------------------------------------------------------------------------
+# UART
+# --------------------------------------------------------------------------
+
+
+class Uart:
+    """One UART of the board, connected through a TCP socket.
+
+    Everything received is appended to a log file and to a buffer; the
+    waits search the buffer from a cursor and move it past what matched, as
+    Renode's terminal tester does. ANSI escape sequences and CR are removed.
+    """
+
+    def __init__(self, name: str, sock: socket.socket, log_path: Path) -> None:
+        self.name = name
+        self._sock = sock
+        self._log = log_path.open("wb")
+        self._buf = ""
+        self._pos = 0
+        self._cond = threading.Condition()
+        self._closed = False
+        self._thread = threading.Thread(target=self._reader, name=f"uart-{name}", daemon=True)
+        self._thread.start()
+
+    def _reader(self) -> None:
+        pending = b""
+        while True:
+            try:
+                data = self._sock.recv(4096)
+            except OSError:
+                data = b""
+            if not data:
+                break
+            self._log.write(data)
+            self._log.flush()
+            pending += data
+            # keep an incomplete escape sequence for the next chunk
+            cut = pending.rfind(b"\x1b")
+            if cut >= 0 and len(pending) - cut < 8 and not re.search(rb"\x1b\[[0-9;?]*[A-Za-z]", pending[cut:]):
+                text, pending = pending[:cut], pending[cut:]
+            else:
+                text, pending = pending, b""
+            clean = ANSI.sub("", text.decode("utf-8", "replace")).replace("\r", "")
+            with self._cond:
+                self._buf += clean
+                self._cond.notify_all()
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def _wait(self, find: Any, timeout: float, what: str) -> str:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                hit = find(self._buf, self._pos)
+                if hit is not None:
+                    start, end = hit
+                    self._pos = end
+                    return self._buf[start:end]
+                left = deadline - time.monotonic()
+                if left <= 0 or self._closed:
+                    tail = self._buf[self._pos:][-800:]
+                    state = "closed" if self._closed else f"{timeout:g} s"
+                    raise QemuError(f"{self.name}: no {what} ({state}); unread output:\n{tail}")
+                self._cond.wait(left)
+
+    def wait_for_line(self, text: str, timeout: float = 10.0, regex: bool = False) -> str:
+        """Wait for a line that contains ``text`` (or matches the regex) and
+        return that whole line (without the newline)."""
+        pat = re.compile(text, re.M) if regex else re.compile(re.escape(text))
+
+        def find(buf: str, pos: int) -> tuple[int, int] | None:
+            m = pat.search(buf, pos)
+            if not m:
+                return None
+            start = buf.rfind("\n", 0, m.start()) + 1
+            end = buf.find("\n", m.end())
+            if end < 0:
+                return None  # the line is not complete yet
+            return max(start, pos), end + 1
+
+        return self._wait(find, timeout, f"line matching {text!r}").rstrip("\n")
+
+    def wait_for_text(self, text: str, timeout: float = 10.0) -> str:
+        """Wait for ``text`` anywhere (no newline needed); return everything
+        from the cursor to the end of the match."""
+
+        def find(buf: str, pos: int) -> tuple[int, int] | None:
+            i = buf.find(text, pos)
+            return None if i < 0 else (pos, i + len(text))
+
+        return self._wait(find, timeout, f"text {text!r}")
+
+    def write(self, data: str) -> None:
+        self._sock.sendall(data.encode())
+
+    def write_line(self, line: str) -> None:
+        self.write(line + "\n")
+
+    @property
+    def cursor(self) -> int:
+        """Index in :attr:`output` up to which the waits have consumed."""
+        with self._cond:
+            return self._pos
+
+    def unread(self) -> str:
+        with self._cond:
+            return self._buf[self._pos:]
+
+    def skip(self) -> None:
+        """Forget everything received so far."""
+        with self._cond:
+            self._pos = len(self._buf)
+
+    @property
+    def output(self) -> str:
+        with self._cond:
+            return self._buf
+
+    def close(self) -> None:
+        try:
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._sock.close()
+        self._thread.join(timeout=2)
+        self._log.close()
+
+
+# --------------------------------------------------------------------------
+# QMP
+# --------------------------------------------------------------------------
+
+
+class Qmp:
+    """A minimal QMP client (JSON lines over a unix socket)."""
+
+    def __init__(self, path: Path, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+                self._sock.connect(str(path))
+                break
+            except OSError:
+                self._sock.close()
+                if time.monotonic() > deadline:
+                    raise QemuError(f"QMP socket {path} did not come up") from None
+                time.sleep(0.05)
+        self._sock.settimeout(timeout)
+        self._file = self._sock.makefile("rwb")
+        self._read()  # greeting
+        self.execute("qmp_capabilities")
+
+    def _read(self) -> dict[str, Any]:
+        while True:
+            line = self._file.readline()
+            if not line:
+                raise QemuError("QMP connection closed")
+            msg = json.loads(line)
+            if "event" not in msg:
+                assert isinstance(msg, dict)
+                return msg
+
+    def execute(self, cmd: str, **arguments: Any) -> Any:
+        req: dict[str, Any] = {"execute": cmd}
+        if arguments:
+            req["arguments"] = arguments
+        self._file.write(json.dumps(req).encode() + b"\n")
+        self._file.flush()
+        resp = self._read()
+        if "error" in resp:
+            raise QemuError(f"QMP {cmd}: {resp['error']}")
+        return resp.get("return")
+
+    def close(self) -> None:
+        try:
+            self._file.close()
+            self._sock.close()
+        except OSError:
+            pass
+
+
+# --------------------------------------------------------------------------
+# The machine
+# --------------------------------------------------------------------------
+
+
+@dataclass
+class QemuMachine:
+    """One QEMU run of a board.
+
+    >>> with QemuMachine(Board.load(), prepare_images(Board.load())) as m:
+    ...     m.uart(0).wait_for_line("userspace ready", timeout=60)
+    """
+
+    board: Board
+    images: Images
+    run_dir: Path | None = None
+    accel: str | None = None
+    extra_args: Sequence[str] = ()
+    keep_logs: bool = False
+    uarts: list[Uart] = field(default_factory=list)
+    _proc: subprocess.Popen[bytes] | None = None
+    _qmp: Qmp | None = None
+    _failed: bool = False
+    started_at: float = 0.0
+
+    def start(self, connect_timeout: float = 20.0) -> QemuMachine:
+        binary = check_qemu(self.board)
+        if self.run_dir is None:
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            self.run_dir = REPO / "build" / "qemu" / f"{self.board.name}-{stamp}-{os.getpid()}"
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        # QMP sockets live in a short path (unix socket names are limited)
+        self._sockdir = Path(f"/tmp/servoamp-qmp-{os.getpid()}-{id(self):x}")
+        self._sockdir.mkdir(exist_ok=True)
+        qmp_path = self._sockdir / "qmp.sock"
+
+        uart_defs = self.board.qemu["uarts"]
+        listeners: list[socket.socket] = []
+        serials: list[str] = []
+        chardevs: list[str] = []
+        for i, u in enumerate(uart_defs):
+            ls = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            ls.bind(("127.0.0.1", 0))
+            ls.listen(1)
+            ls.settimeout(connect_timeout)
+            listeners.append(ls)
+            port = ls.getsockname()[1]
+            chardevs += [
+                "-chardev",
+                f"socket,id=uart{i},host=127.0.0.1,port={port},server=off,nodelay=on",
+            ]
+            serials.append(f"chardev:uart{i}")
+        args = chardevs + qemu_args(self.board, self.images, serials, self.accel)
+        args += ["-qmp", f"unix:{qmp_path},server=on,wait=off"]
+        args += list(self.extra_args)
+        cmd = [binary] + args
+        (self.run_dir / "cmdline.txt").write_text(" ".join(cmd) + "\n")
+        stderr = (self.run_dir / "qemu.stderr").open("wb")
+        self.started_at = time.monotonic()
+        self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=stderr, stderr=stderr)
+        stderr.close()
+        try:
+            for i, (ls, u) in enumerate(zip(listeners, uart_defs)):
+                try:
+                    conn, _ = ls.accept()
+                except socket.timeout:
+                    raise QemuError(f"QEMU did not connect {u['name']}; see {self.run_dir}/qemu.stderr") from None
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                self.uarts.append(Uart(str(u["name"]), conn, self.run_dir / f"{u['name']}.log"))
+            self._qmp = Qmp(qmp_path)
+        except BaseException:
+            self._failed = True
+            self.stop()
+            raise
+        finally:
+            for ls in listeners:
+                ls.close()
+        return self
+
+    def uart(self, which: int | str) -> Uart:
+        if isinstance(which, int):
+            return self.uarts[which]
+        for u in self.uarts:
+            if u.name == which:
+                return u
+        raise QemuError(f"no UART {which!r} (have {[u.name for u in self.uarts]})")
+
+    def hmp(self, command: str, cpu: int | None = None) -> str:
+        """A human-monitor command (e.g. ``xp /4wx 0xffff8000``), on the
+        given CPU's context for CPU-specific ones (``info registers``)."""
+        if self._qmp is None:
+            raise QemuError("QEMU is not running")
+        args: dict[str, Any] = {"command-line": command}
+        if cpu is not None:
+            args["cpu-index"] = cpu
+        out = self._qmp.execute("human-monitor-command", **args)
+        return str(out)
+
+    def read_word(self, addr: int) -> int:
+        """A 32-bit word of guest physical memory, read through the monitor."""
+        out = self.hmp(f"xp /1wx {addr:#x}")
+        m = re.search(r":\s*(0x[0-9a-fA-F]+)", out)
+        if not m:
+            raise QemuError(f"cannot parse xp output: {out!r}")
+        return int(m.group(1), 16)
+
+    def wait_word(self, addr: int, value: int, timeout: float = 5.0, interval: float = 0.05) -> float:
+        """Poll a word until it equals ``value``; return the seconds waited."""
+        t0 = time.monotonic()
+        while True:
+            if self.read_word(addr) == value:
+                return time.monotonic() - t0
+            if time.monotonic() - t0 > timeout:
+                raise QemuError(f"word at {addr:#x} is {self.read_word(addr):#x}, not {value:#x} after {timeout:g} s")
+            time.sleep(interval)
+
+    def mark_failed(self) -> None:
+        """Keep the run directory whatever happens at stop()."""
+        self._failed = True
+
+    @property
+    def running(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
+
+    def stop(self, timeout: float = 5.0) -> int | None:
+        """Quit QEMU (QMP quit, then SIGTERM, then SIGKILL), close the UARTs,
+        and remove the run directory unless something failed or keep_logs."""
+        rc: int | None = None
+        if self._proc is not None:
+            if self._proc.poll() is None and self._qmp is not None:
+                try:
+                    self._qmp.execute("quit")
+                except (QemuError, OSError):
+                    pass
+            for sig in (None, signal.SIGTERM, signal.SIGKILL):
+                if sig is not None and self._proc.poll() is None:
+                    self._proc.send_signal(sig)
+                try:
+                    rc = self._proc.wait(timeout=timeout)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
+            self._proc = None
+        if self._qmp is not None:
+            self._qmp.close()
+            self._qmp = None
+        for u in self.uarts:
+            u.close()
+        self.uarts = []
+        if getattr(self, "_sockdir", None) is not None:
+            shutil.rmtree(self._sockdir, ignore_errors=True)
+        if self.run_dir is not None:
+            if self._failed or self.keep_logs:
+                _log(f"logs kept in {self.run_dir}")
+            else:
+                shutil.rmtree(self.run_dir, ignore_errors=True)
+        return rc
+
+    def __enter__(self) -> QemuMachine:
+        return self.start() if self._proc is None else self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is not None:
+            self._failed = True
+        self.stop()
+
+
+@dataclass(frozen=True)
+class BootTimes:
+    """Host seconds from QEMU start to the first kernel line and the shell."""
+
+    first_line: float
+    shell: float
+    guest_userspace: float
+
+
+def boot_to_shell(machine: QemuMachine, timeout: float = 60.0) -> BootTimes:
+    """Wait until the console shell is usable; return the timings."""
+    console = machine.uart(0)
+    prompt = str(machine.board.data["linux"]["prompt"])
+    console.wait_for_line("Booting Linux", timeout=timeout)
+    first = time.monotonic() - machine.started_at
+    line = console.wait_for_line(r"servoamp: userspace ready at ([0-9.]+) s", timeout=timeout, regex=True)
+    m = re.search(r"ready at ([0-9.]+) s", line)
+    console.wait_for_text(prompt, timeout=timeout)
+    shell = time.monotonic() - machine.started_at
+    return BootTimes(first_line=first, shell=shell, guest_userspace=float(m.group(1)) if m else -1.0)
+
+
+def run_shell(console: Uart, command: str, prompt: str, timeout: float = 20.0) -> tuple[int, str]:
+    """Run ``command`` in the guest shell on ``console``; return its exit
+    status and output (without the echoed command line).
+
+    The output is framed by markers that are printed through a format
+    string, so the echoed command line (which the shell may wrap anywhere)
+    never matches them.
+    """
+    console.write_line(f"printf '__%s__\\n' beg; {command}; printf '\\n__rc=%d__\\n' $?")
+    console.wait_for_line(r"^__beg__$", timeout=timeout, regex=True)
+    begin = console.cursor
+    rc_line = console.wait_for_line(r"^__rc=\d+__$", timeout=timeout, regex=True)
+    end = console.cursor - len(rc_line) - 1
+    text = console.output[begin:end]
+    text = text[:-1] if text.endswith("\n") else text  # printf's leading newline
+    console.wait_for_text(prompt, timeout=timeout)
+    return int(rc_line[5:-2]), text.rstrip("\n")
+
+
+def interactive(board: Board, images: Images, accel: str | None = None, uart1_log: Path | None = None) -> int:
+    """Boot with UART0 (and the QEMU monitor: Ctrl-A c) on this terminal and
+    UART1 in a log file; return QEMU's exit code."""
+    binary = check_qemu(board)
+    uart1_log = uart1_log or (REPO / "build" / "qemu" / "uart1.log")
+    uart1_log.parent.mkdir(parents=True, exist_ok=True)
+    serials = ["mon:stdio", f"file:{uart1_log}"]
+    cmd = [binary] + qemu_args(board, images, serials, accel)
+    _log("UART0 (Linux console) on this terminal; Ctrl-A x quits, Ctrl-A c is the monitor")
+    _log(f"UART1 (servo core) in {uart1_log}")
+    return subprocess.call(cmd)
+
+
+def iter_word_samples(machine: QemuMachine, addr: int, count: int, interval: float) -> Iterator[int]:
+    """``count`` reads of a word, ``interval`` seconds apart."""
+    for i in range(count):
+        if i:
+            time.sleep(interval)
+        yield machine.read_word(addr)

@@ -1,0 +1,124 @@
+"""``west emu``: build what is missing and boot the emulated board in QEMU.
+
+    west emu                         # interactive: Linux console here
+    west emu -c 'cat /proc/cpuinfo'  # scripted: boot, run, print, quit
+    west emu --script cmds.sh        # scripted, one shell command a line
+    west emu --build-only            # just build/refresh the images
+
+What it builds (each step is cached and costs about a second when nothing
+changed): the kernel (linux/kernel/build.sh, cached by source version +
+config fragment), the remoteproc module, rpu_app (its Makefile, when it
+exists), the test firmware (tests/robot/fixtures), the initramfs, the boot
+stub and the DTB. The board's numbers come from boards/<board>/board.yaml.
+
+Interactive mode: UART0 (the Linux console) and the QEMU monitor share this
+terminal (Ctrl-A c switches to the monitor, Ctrl-A x quits); UART1 (the
+servo core's console) goes to a log file. Scripted mode: UARTs on sockets
+bound to 127.0.0.1, the monitor on QMP; exits non-zero when a command fails.
+
+Also runs without a west workspace: ``.venv/bin/python scripts/west_commands/emu.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "python"))
+
+from servoamp import qemu  # noqa: E402
+
+DESCRIPTION = "build what is missing and boot the emulated board (QEMU)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    parser.add_argument("-b", "--board", default="zynq7000_qemu", help="board folder under boards/ (default: %(default)s)")
+    parser.add_argument("--accel", default=None, help="QEMU -accel value, e.g. 'tcg,thread=single' (default: QEMU's, multi-threaded TCG)")
+    parser.add_argument("--firmware", action="append", type=Path, default=None, metavar="ELF",
+                        help="ELF to put in /lib/firmware (repeatable; default: test fixtures + rpu_app)")
+    parser.add_argument("--no-rpu-app", action="store_true", help="do not build or include rpu_app")
+    parser.add_argument("-c", "--command", action="append", default=[], metavar="CMD",
+                        help="scripted mode: run CMD in the guest shell (repeatable)")
+    parser.add_argument("--script", type=Path, help="scripted mode: run each line of this file in the guest shell")
+    parser.add_argument("--timeout", type=float, default=60.0, help="seconds per boot or command in scripted mode")
+    parser.add_argument("--keep-logs", action="store_true", help="keep build/qemu/<run>/ (UART logs) even on success")
+    parser.add_argument("--build-only", action="store_true", help="build the images, do not boot")
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    board = qemu.Board.load(args.board)
+    t0 = time.monotonic()
+    images = qemu.prepare_images(board, args.firmware, with_rpu_app=not args.no_rpu_app)
+    print(f"[emu] images ready in {time.monotonic() - t0:.1f} s")
+    for name in ("stub", "zimage", "dtb", "initramfs"):
+        print(f"[emu]   {name:9} {getattr(images, name)}")
+    print(f"[emu]   firmware  {' '.join(p.name for p in images.firmware) or '-'}")
+    if args.build_only:
+        return 0
+
+    commands = list(args.command)
+    if args.script:
+        commands += [ln for ln in args.script.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if not commands:
+        return qemu.interactive(board, images, accel=args.accel)
+    return scripted(board, images, commands, args)
+
+
+def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: argparse.Namespace) -> int:
+    machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs)
+    failed = 0
+    with machine:
+        times = qemu.boot_to_shell(machine, timeout=args.timeout)
+        print(f"[emu] shell after {times.shell:.2f} s (host; first kernel line {times.first_line:.2f} s, "
+              f"userspace at {times.guest_userspace:.2f} s guest uptime)")
+        console = machine.uart(0)
+        prompt = str(board.data["linux"]["prompt"])
+        for cmd in commands:
+            rc, out = qemu.run_shell(console, cmd, prompt, timeout=args.timeout)
+            print(f"$ {cmd}")
+            if out:
+                print(out)
+            if rc:
+                print(f"[emu] exit status {rc}")
+                failed += 1
+        uart1 = machine.uart(1).output
+        if uart1:
+            print("[emu] UART1 (servo core):")
+            print(uart1.rstrip("\n"))
+        if failed:
+            machine.mark_failed()
+    return 1 if failed else 0
+
+
+try:
+    from west.commands import WestCommand
+
+    class Emu(WestCommand):
+        def __init__(self) -> None:
+            super().__init__("emu", DESCRIPTION, __doc__ or "", accepts_unknown_args=False)
+
+        def do_add_parser(self, parser_adder):  # type: ignore[no-untyped-def]
+            parser = parser_adder.add_parser(self.name, help=self.help, description=self.description,
+                                             formatter_class=argparse.RawDescriptionHelpFormatter)
+            return add_arguments(parser)
+
+        def do_run(self, args, unknown):  # type: ignore[no-untyped-def]
+            try:
+                rc = run(args)
+            except qemu.QemuError as e:
+                self.die(str(e))
+            if rc:
+                sys.exit(rc)
+
+except ImportError:  # plain Python, no west
+    pass
+
+
+if __name__ == "__main__":
+    p = add_arguments(argparse.ArgumentParser(prog="emu", description=__doc__,
+                                              formatter_class=argparse.RawDescriptionHelpFormatter))
+    sys.exit(run(p.parse_args()))

@@ -1,0 +1,29 @@
+"""Shared fixtures of the board tests: the images are built (or taken from
+the caches) once per pytest session, before any QEMU boot, so that a cold
+kernel build is not counted against a suite's timeout."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "python"))
+
+from servoamp import qemu  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def board() -> qemu.Board:
+    return qemu.Board.load("zynq7000_qemu")
+
+
+@pytest.fixture(scope="session")
+def images(board: qemu.Board) -> qemu.Images:
+    t0 = time.monotonic()
+    imgs = qemu.prepare_images(board)
+    print(f"\n[board] images ready in {time.monotonic() - t0:.1f} s", file=sys.stderr)
+    return imgs

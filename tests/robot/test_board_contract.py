@@ -1,0 +1,87 @@
+"""Static checks of the zynq7000_qemu board (no QEMU boot): the numbers of
+board.yaml, the Linux devicetree, the firmware engineer's servo.dts and the
+boot stub agree; the DT bindings validate; the remoteproc driver is
+checkpatch-clean and builds without warnings."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from servoamp import qemu
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def fdtget(dtb: Path, node: str, prop: str, typ: str = "x") -> list[int] | str:
+    out = subprocess.run(["fdtget", "-t", typ, str(dtb), node, prop], capture_output=True, text=True, check=True).stdout.strip()
+    return out if typ == "s" else [int(v, 16) for v in out.split()]
+
+
+@pytest.fixture(scope="module")
+def dtb(board: qemu.Board) -> Path:
+    kdir = qemu.kernel_dir()
+    return qemu.build_dtb(board, qemu.kernel_source(kdir))  # raises on dtc warnings
+
+
+def test_linux_dt_matches_board_yaml(board: qemu.Board, dtb: Path) -> None:
+    s = board.data["servo"]
+    rp = "/axi/remoteproc@ffff8000"
+    assert fdtget(dtb, "/reserved-memory/servo-carveout@1f000000", "reg") == [s["carveout"]["base"], s["carveout"]["size"]]
+    assert fdtget(dtb, "/axi/ocm-mailbox@ffff0000", "reg") == [s["mailbox"]["base"], s["mailbox"]["size"]]
+    assert fdtget(dtb, rp, "reg") == [s["control_word"], 8, s["boot_register"], 4]
+    assert s["status_word"] == s["control_word"] + 4
+    assert fdtget(dtb, rp, "servoamp,park-address") == [board.addr("load", "park_loop")]
+    assert fdtget(dtb, "/memory@0", "reg") == [board.addr("ddr", "base"), board.addr("ddr", "size")]
+    bootargs = fdtget(dtb, "/chosen", "bootargs", "s")
+    assert isinstance(bootargs, str)
+    assert "maxcpus=1" in bootargs and f"console={board.data['linux']['console']}" in bootargs
+    assert fdtget(dtb, "/axi/serial@e0001000", "status", "s") == "disabled"
+    assert fdtget(dtb, "/axi/timer@f8002000", "status", "s") == "disabled"
+
+
+def test_servo_dts_agrees(board: qemu.Board) -> None:
+    """The firmware side (boards/<board>/servo.dts) uses the same carveout."""
+    servo = board.folder / "servo.dts"
+    if not servo.exists():
+        pytest.skip("servo.dts not written yet")
+    text = servo.read_text()
+    c = board.data["servo"]["carveout"]
+    assert re.search(rf"reg\s*=\s*<\s*{c['base']:#010x}\s+{c['size']:#010x}\s*>", text), "carveout differs in servo.dts"
+
+
+def test_boot_stub_park_loop_address(board: qemu.Board) -> None:
+    qemu.build_stub(board)
+    nm = subprocess.run(["arm-none-eabi-nm", str(board.build_dir / "stub.elf")], capture_output=True, text=True, check=True).stdout
+    syms = {ln.split()[2]: int(ln.split()[0], 16) for ln in nm.splitlines() if len(ln.split()) == 3}
+    assert syms["_start"] == board.addr("load", "boot_stub")
+    assert syms["park"] == board.addr("load", "park_loop")
+    assert (board.build_dir / "stub.bin").stat().st_size <= 4096
+
+
+def test_bindings_validate() -> None:
+    tool = Path(sys.executable).with_name("dt-doc-validate")
+    bindings = sorted((REPO / "devicetree" / "bindings").rglob("*.yaml"))
+    res = subprocess.run([str(tool), *map(str, bindings)], capture_output=True, text=True)
+    assert res.returncode == 0 and not res.stderr.strip(), res.stderr
+
+
+def test_driver_checkpatch_clean() -> None:
+    kdir = qemu.kernel_dir()
+    script = qemu.kernel_source(kdir) / "scripts" / "checkpatch.pl"
+    res = subprocess.run([str(script), "--no-tree", "--strict", "-f", "zynq_servo_rproc.c"],
+                         cwd=REPO / "linux" / "remoteproc", capture_output=True, text=True)
+    assert "total: 0 errors, 0 warnings, 0 checks" in res.stdout, res.stdout
+
+
+def test_driver_builds_without_warnings(tmp_path: Path) -> None:
+    kdir = qemu.kernel_dir()
+    res = subprocess.run(["make", "-C", str(REPO / "linux" / "remoteproc"), f"KDIR={kdir / 'obj'}", f"BUILD={tmp_path}"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "warning" not in (res.stdout + res.stderr).lower(), res.stdout + res.stderr
+    assert (tmp_path / "zynq_servo_rproc.ko").exists()
