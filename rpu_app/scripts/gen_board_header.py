@@ -1,0 +1,328 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""Generate rpu_app's board configuration from the servo devicetree.
+
+    gen_board_header.py --dts boards/<board>/servo.dts --board <board> \
+        --out-dir build/rpu_app/<board> [--bindings rpu_app/dts/bindings]
+
+Reads the devicetree with python-devicetree (edtlib) and the local YAML
+bindings, starting at the node named by /chosen/servoamp,servo, and writes:
+
+  board_config.h    every address, size, interrupt number, priority, period
+                    and timer setting the firmware needs (BOARD_* macros)
+  board_memory.ld   the linker MEMORY regions (carveout split into the
+                    cacheable image part and the non-cacheable top part)
+
+Both files are rewritten only when their content changes, so make does not
+rebuild needlessly. Errors in the devicetree (missing nodes, a period the
+16-bit TTC cannot produce, regions that are not section aligned...) stop the
+build with a message naming the node.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+DEFAULT_BINDINGS = HERE.parent / "dts" / "bindings"
+SECTION = 1 << 20  # MMU section (1 MiB)
+
+GIC_SPI, GIC_PPI = 0, 1
+GIC_IRQ_TYPE_EDGE_RISING, GIC_IRQ_TYPE_EDGE_FALLING = 1, 2
+GIC_IRQ_TYPE_LEVEL_HIGH, GIC_IRQ_TYPE_LEVEL_LOW = 4, 8
+
+
+class GenError(Exception):
+    pass
+
+
+def fail(node, msg: str):
+    where = node.path if node is not None else "devicetree"
+    raise GenError(f"{where}: {msg}")
+
+
+def prop(node, name: str):
+    p = node.props.get(name)
+    if p is None:
+        fail(node, f"missing property '{name}'")
+    return p.val
+
+
+def one_reg(node, name: str | None = None):
+    regs = node.regs
+    if name is not None:
+        for r in regs:
+            if r.name == name:
+                return r.addr, r.size
+        fail(node, f"no reg named '{name}'")
+    if not regs:
+        fail(node, "no 'reg'")
+    return regs[0].addr, regs[0].size
+
+
+def gic_id(node, idx: int):
+    """(GIC interrupt ID, 'level'|'edge') of the node's interrupt idx."""
+    irqs = node.interrupts
+    if idx >= len(irqs):
+        fail(node, f"has {len(irqs)} interrupts, index {idx} requested")
+    data = irqs[idx].data
+    kind, num, flags = data["type"], data["irq"], data["flags"] & 0xF
+    if kind == GIC_SPI:
+        gid = 32 + num
+    elif kind == GIC_PPI:
+        gid = 16 + num
+    else:
+        fail(node, f"interrupt type {kind} is neither SPI nor PPI")
+    if flags in (GIC_IRQ_TYPE_LEVEL_HIGH, GIC_IRQ_TYPE_LEVEL_LOW):
+        trig = "level"
+    elif flags in (GIC_IRQ_TYPE_EDGE_RISING, GIC_IRQ_TYPE_EDGE_FALLING):
+        trig = "edge"
+    else:
+        fail(node, f"interrupt flags {flags:#x} unsupported")
+    return gid, trig
+
+
+def ttc_setting(node, freq: int, period_us: int):
+    """Smallest prescaler giving a 16-bit interval for the period.
+
+    TTC counters are 16 bits. Clock control: PS_EN=1 divides the input by
+    2^(PS_V+1), PS_V 0..15. Returns (ps_en, ps_v, interval, ns_per_tick_q16,
+    real_period_ns)."""
+    choices = [(0, 0, 1)] + [(1, v, 1 << (v + 1)) for v in range(16)]
+    for ps_en, ps_v, div in choices:
+        ticks = (freq * period_us + div * 500000) // (div * 1000000)
+        if 2 <= ticks <= 0x10000:
+            ns_q16 = (div * 1_000_000_000 * 65536 + freq // 2) // freq
+            real_ns = ticks * div * 1_000_000_000 // freq
+            return ps_en, ps_v, ticks - 1, ns_q16, real_ns
+    fail(node, f"cycle period {period_us} us not reachable with a 16-bit counter at {freq} Hz")
+
+
+def build(dts: Path, bindings: list[Path], board: str):
+    try:
+        from devicetree import edtlib
+    except ImportError as e:  # pragma: no cover - environment problem
+        raise GenError("python-devicetree is not installed (scripts/bootstrap.sh)") from e
+
+    edt = edtlib.EDT(str(dts), [str(b) for b in bindings], werror=True)
+    servo = edt.chosen_node("servoamp,servo")
+    if servo is None:
+        raise GenError(f"{dts}: /chosen has no 'servoamp,servo'")
+
+    cfg: dict[str, object] = {}
+    comments: dict[str, str] = {}
+
+    def put(name, value, comment=""):
+        cfg[name] = value
+        if comment:
+            comments[name] = comment
+
+    cpu = prop(servo, "cpu")
+    put("BOARD_CPU_ID", cpu.regs[0].addr if cpu.regs else 0, f"{cpu.path}")
+
+    # ---- memory ------------------------------------------------------
+    carve = prop(servo, "memory-region")
+    c_base, c_size = one_reg(carve)
+    if c_base % SECTION or c_size % SECTION:
+        fail(carve, "carveout must be 1 MiB aligned (MMU sections)")
+    unc = prop(servo, "uncached-size")
+    if unc % SECTION or not 0 < unc < c_size:
+        fail(servo, "uncached-size must be a non-zero multiple of 1 MiB below the carveout size")
+    trace = prop(servo, "trace-size")
+    if not 256 <= trace <= unc or trace % 32:
+        fail(servo, "trace-size must be 256..uncached-size bytes, multiple of 32")
+    put("BOARD_CARVEOUT_BASE", c_base, carve.path)
+    put("BOARD_CARVEOUT_SIZE", c_size)
+    put("BOARD_IMAGE_BASE", c_base, "cacheable part: code, data, stacks")
+    put("BOARD_IMAGE_SIZE", c_size - unc)
+    put("BOARD_UNCACHED_BASE", c_base + c_size - unc, "non-cacheable part: trace buffer")
+    put("BOARD_UNCACHED_SIZE", unc)
+    put("BOARD_TRACE_SIZE", trace)
+
+    # ---- OCM contract ------------------------------------------------
+    amp = prop(servo, "amp-region")
+    a_base, a_size = one_reg(amp)
+    put("BOARD_AMP_BASE", a_base, amp.path)
+    put("BOARD_AMP_SIZE", a_size)
+    ctl = prop(servo, "stop-control")
+    put("BOARD_STOP_CONTROL_ADDR", one_reg(ctl, "control")[0], ctl.path)
+    put("BOARD_STOP_STATUS_ADDR", one_reg(ctl, "status")[0])
+    park = prop(servo, "cpu-park")
+    put("BOARD_PARK_ADDR", one_reg(park)[0], park.path)
+    boot = prop(servo, "boot-register")
+    put("BOARD_BOOT_REG_ADDR", one_reg(boot)[0], boot.path)
+    ocm = amp.parent
+    o_base, o_size = one_reg(ocm)
+    put("BOARD_OCM_BASE", o_base, ocm.path)
+    put("BOARD_OCM_SIZE", o_size)
+    for n in (amp, ctl, park, boot):
+        if n.parent is not ocm:
+            fail(n, "must be a child of the OCM node")
+
+    # ---- interrupt controller and timers ------------------------------
+    ttc = prop(servo, "cycle-timer")
+    gic = ttc.interrupts[0].controller if ttc.interrupts else None
+    if gic is None or "arm,cortex-a9-gic" not in gic.compats:
+        fail(ttc, "interrupt parent must be an arm,cortex-a9-gic")
+    put("BOARD_GICD_BASE", one_reg(gic, "distributor")[0], gic.path)
+    put("BOARD_GICC_BASE", one_reg(gic, "cpu")[0])
+
+    gt = prop(servo, "global-timer")
+    put("BOARD_GTIMER_BASE", one_reg(gt)[0], gt.path)
+    gt_hz = prop(gt, "clock-frequency")
+    if gt_hz % 1_000_000:
+        fail(gt, "clock-frequency must be a whole number of MHz")
+    put("BOARD_GTIMER_HZ", gt_hz)
+    put("BOARD_GTIMER_TICKS_PER_US", gt_hz // 1_000_000)
+
+    idx = prop(servo, "cycle-counter")
+    if not 0 <= idx <= 2:
+        fail(servo, "cycle-counter must be 0..2")
+    period = prop(servo, "cycle-period-us")
+    if not 10 <= period <= 1_000_000:
+        fail(servo, "cycle-period-us must be 10..1000000")
+    ttc_hz = prop(ttc, "clock-frequency")
+    irq, trig = gic_id(ttc, idx)
+    if irq < 32:
+        fail(ttc, "the cycle interrupt must be an SPI")
+    ps_en, ps_v, interval, ns_q16, real_ns = ttc_setting(servo, ttc_hz, period)
+    put("BOARD_TTC_BASE", one_reg(ttc)[0], ttc.path)
+    put("BOARD_TTC_HZ", ttc_hz)
+    put("BOARD_CYCLE_COUNTER", idx)
+    put("BOARD_CYCLE_IRQ", irq, f"GIC ID, {trig}-triggered")
+    put("BOARD_CYCLE_IRQ_LEVEL", 1 if trig == "level" else 0)
+    put("BOARD_CYCLE_PERIOD_US", period)
+    put("BOARD_CYCLE_PERIOD_NS", real_ns, "what the counter really produces")
+    put("BOARD_CYCLE_PS_EN", ps_en)
+    put("BOARD_CYCLE_PS_V", ps_v, "prescaler: divide by 2^(PS_V+1) when PS_EN")
+    put("BOARD_CYCLE_INTERVAL", interval, "interval register (period - 1 ticks)")
+    put("BOARD_CYCLE_NS_PER_TICK_Q16", ns_q16, "counter tick in ns, Q16.16")
+    prio = prop(servo, "cycle-priority")
+    nprio = prop(servo, "nest-test-priority")
+    sgi = prop(servo, "nest-test-sgi")
+    for name, v in (("cycle-priority", prio), ("nest-test-priority", nprio)):
+        if not 0 <= v <= 0xF8 or v % 8:
+            fail(servo, f"{name} must be 0..0xf8, multiple of 8 (A9: 32 levels)")
+    if not nprio < prio:
+        fail(servo, "nest-test-priority must be higher (numerically lower) than cycle-priority")
+    if not 8 <= sgi <= 15:
+        fail(servo, "nest-test-sgi must be 8..15 (0..7 are Linux IPIs)")
+    put("BOARD_CYCLE_PRIORITY", prio)
+    put("BOARD_NEST_TEST_SGI", sgi)
+    put("BOARD_NEST_TEST_PRIORITY", nprio)
+
+    uart = prop(servo, "console")
+    put("BOARD_UART_BASE", one_reg(uart)[0], uart.path)
+    put("BOARD_UART_REF_HZ", prop(uart, "clock-frequency"))
+    put("BOARD_UART_BAUD", prop(uart, "current-speed"))
+
+    slcr = edt.compat2okay.get("xlnx,zynq-slcr")
+    if not slcr:
+        raise GenError(f"{dts}: no xlnx,zynq-slcr node")
+    put("BOARD_SLCR_BASE", one_reg(slcr[0])[0], slcr[0].path)
+
+    put("BOARD_ATTACH_RETRY_CYCLES", prop(servo, "attach-retry-cycles"))
+    put("BOARD_STATS_CYCLES", prop(servo, "stats-cycles"))
+
+    # ---- MMU map: 1 MiB sections of every device node the firmware uses
+    dev_sections: dict[int, str] = {}
+    for n in (uart, ttc, gic, gt, slcr[0]):
+        for r in n.regs:
+            for s in range(r.addr // SECTION, (r.addr + r.size - 1) // SECTION + 1):
+                dev_sections.setdefault(s * SECTION, n.path)
+    ocm_sections = sorted({s * SECTION for s in range(o_base // SECTION, (o_base + o_size - 1) // SECTION + 1)})
+    for s in ocm_sections:
+        if s in dev_sections:
+            fail(ocm, f"shares MMU section {s:#x} with device {dev_sections[s]}")
+    mmu = []
+    mmu.append((c_base, c_size - unc, "MMU_NORMAL_WB", "carveout image"))
+    mmu.append((c_base + c_size - unc, unc, "MMU_NORMAL_NC", "carveout uncached top"))
+    for s in ocm_sections:
+        mmu.append((s, SECTION, "MMU_NORMAL_NC", "OCM (amp_lib, stop words, boot register)"))
+    for s, path in sorted(dev_sections.items()):
+        mmu.append((s, SECTION, "MMU_DEVICE", path))
+
+    return cfg, comments, mmu
+
+
+def render_header(cfg, comments, mmu, board: str, dts: Path) -> str:
+    out = [
+        "/* Generated by rpu_app/scripts/gen_board_header.py: do not edit. */",
+        f"/* Board: {board}, devicetree: {dts.as_posix()} */",
+        "#ifndef BOARD_CONFIG_H",
+        "#define BOARD_CONFIG_H",
+        "",
+        "/* Unsigned in C, plain numbers in assembly (like Linux's _AC). */",
+        "#ifdef __ASSEMBLER__",
+        "#define BOARD_U(x) x",
+        "#else",
+        "#define BOARD_U(x) x##u",
+        "#endif",
+        "",
+        f'#define BOARD_NAME "{board}"',
+    ]
+    for k, v in cfg.items():
+        val = f"BOARD_U(0x{v:08x})" if k.endswith(("_BASE", "_ADDR", "_SIZE", "_Q16")) else f"BOARD_U({v})"
+        c = comments.get(k)
+        out.append(f"#define {k} {val}" + (f"\t/* {c} */" if c else ""))
+    out += ["", "#ifndef __ASSEMBLER__",
+            "/* MMU regions: X(base, size, attributes) in 1 MiB sections. */",
+            "#define BOARD_MMU_REGIONS(X) \\"]
+    for base, size, attr, what in mmu:
+        out.append(f"\tX(0x{base:08x}u, 0x{size:08x}u, {attr}) /* {what} */ \\")
+    out += ["", "#endif /* __ASSEMBLER__ */", "", "#endif /* BOARD_CONFIG_H */", ""]
+    return "\n".join(out)
+
+
+def render_ld(cfg, board: str) -> str:
+    return "\n".join([
+        "/* Generated by rpu_app/scripts/gen_board_header.py: do not edit. */",
+        f"/* Board: {board} */",
+        "MEMORY",
+        "{",
+        f"\tIMAGE (rwx) : ORIGIN = 0x{cfg['BOARD_IMAGE_BASE']:08x}, LENGTH = 0x{cfg['BOARD_IMAGE_SIZE']:08x}",
+        f"\tUNCACHED (rw) : ORIGIN = 0x{cfg['BOARD_UNCACHED_BASE']:08x}, LENGTH = 0x{cfg['BOARD_UNCACHED_SIZE']:08x}",
+        f"\tOCM (rwx) : ORIGIN = 0x{cfg['BOARD_OCM_BASE']:08x}, LENGTH = 0x{cfg['BOARD_OCM_SIZE']:08x}",
+        "}",
+        f"__carveout_start = 0x{cfg['BOARD_CARVEOUT_BASE']:08x};",
+        f"__carveout_end = 0x{cfg['BOARD_CARVEOUT_BASE'] + cfg['BOARD_CARVEOUT_SIZE']:08x};",
+        f"__trace_size = 0x{cfg['BOARD_TRACE_SIZE']:x};",
+        "",
+    ])
+
+
+def write_if_changed(path: Path, text: str) -> None:
+    if path.exists() and path.read_text() == text:
+        return
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--dts", required=True, type=Path)
+    ap.add_argument("--board", required=True)
+    ap.add_argument("--out-dir", required=True, type=Path)
+    ap.add_argument("--bindings", action="append", type=Path,
+                    help=f"binding directory (default {DEFAULT_BINDINGS})")
+    a = ap.parse_args(argv)
+    try:
+        cfg, comments, mmu = build(a.dts, a.bindings or [DEFAULT_BINDINGS], a.board)
+    except GenError as e:
+        print(f"gen_board_header: error: {e}", file=sys.stderr)
+        return 1
+    except Exception as e:  # edtlib errors carry their own message
+        print(f"gen_board_header: error: {type(e).__name__}: {e}", file=sys.stderr)
+        return 1
+    a.out_dir.mkdir(parents=True, exist_ok=True)
+    write_if_changed(a.out_dir / "board_config.h", render_header(cfg, comments, mmu, a.board, a.dts))
+    write_if_changed(a.out_dir / "board_memory.ld", render_ld(cfg, a.board))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

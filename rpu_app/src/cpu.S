@@ -1,0 +1,114 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * cpu.S - cache maintenance and the final step of the cooperative stop.
+ *
+ * Written in assembly because they must not touch memory through the data
+ * cache while it is being switched: no stack use between turning the
+ * D-cache off and the clean/invalidate, and none after the MMU is off
+ * except the status-word store.
+ */
+	.syntax unified
+	.arm
+	.section .text.cpu, "ax"
+
+/*
+ * dcache_setway(op): op 0 = invalidate (DCISW), 1 = clean+invalidate
+ * (DCCISW), every data/unified cache level up to the Level of Coherency
+ * (CLIDR). On the A9 this is L1 only: the PL310 L2 is an outer cache
+ * owned by Linux and is never maintained (or used) by the firmware, whose
+ * cacheable memory is marked outer non-cacheable (see mmu.c).
+ *
+ * dcache_setway_regs is the same loop without any memory access (no
+ * stack): it uses r0-r3 and r7-r12 and keeps r4-r6, sp and lr, so that
+ * cpu_park can run it with the D-cache already off (a push there could be
+ * overwritten by the write-back of a stale dirty line of the stack).
+ */
+	.global dcache_setway
+	.type dcache_setway, %function
+dcache_setway:
+	push	{r4-r11, lr}
+	bl	dcache_setway_regs
+	pop	{r4-r11, pc}
+	.size dcache_setway, . - dcache_setway
+
+	.type dcache_setway_regs, %function
+dcache_setway_regs:
+	mov	r11, r0			/* op */
+	mrc	p15, 1, r0, c0, c0, 1	/* CLIDR */
+	ands	r3, r0, #0x07000000	/* LoC */
+	mov	r3, r3, lsr #23		/* LoC * 2 */
+	beq	5f
+	mov	r10, #0			/* level * 2 */
+1:	add	r2, r10, r10, lsr #1	/* level * 3 */
+	mov	r1, r0, lsr r2
+	and	r1, r1, #7		/* cache type at this level */
+	cmp	r1, #2
+	blt	4f			/* no data cache */
+	mcr	p15, 2, r10, c0, c0, 0	/* CSSELR */
+	isb
+	mrc	p15, 1, r1, c0, c0, 0	/* CCSIDR */
+	and	r2, r1, #7
+	add	r2, r2, #4		/* log2(line bytes) */
+	movw	r8, #0x3ff
+	ands	r8, r8, r1, lsr #3	/* ways - 1 */
+	clz	r12, r8			/* way shift */
+	movw	r7, #0x7fff
+	ands	r7, r7, r1, lsr #13	/* sets - 1 */
+2:	mov	r9, r8			/* way */
+3:	orr	r1, r10, r9, lsl r12
+	orr	r1, r1, r7, lsl r2
+	cmp	r11, #0
+	mcreq	p15, 0, r1, c7, c6, 2	/* DCISW */
+	mcrne	p15, 0, r1, c7, c14, 2	/* DCCISW */
+	subs	r9, r9, #1
+	bge	3b
+	subs	r7, r7, #1
+	bge	2b
+4:	add	r10, r10, #2
+	cmp	r3, r10
+	bgt	1b
+5:	mov	r10, #0
+	mcr	p15, 2, r10, c0, c0, 0	/* CSSELR back to L1 */
+	dsb
+	isb
+	bx	lr
+	.size dcache_setway_regs, . - dcache_setway_regs
+
+/*
+ * cpu_park(park_addr, status_addr, status_value): never returns.
+ * IRQ/FIQ masked, SVC mode; D-cache off, then clean+invalidate it (the
+ * order ARM recommends, so no line can be allocated after the clean),
+ * MMU/I-cache/branch prediction off, TLB/I-cache/BTB invalidated; then
+ * the status word is written and the core branches to the park loop,
+ * which waits (wfe) for the boot register to hold a new entry.
+ * The caller has stopped every interrupt source of the firmware.
+ */
+	.global cpu_park
+	.type cpu_park, %function
+cpu_park:
+	cpsid	aif, #0x13
+	mov	r4, r0
+	mov	r5, r1
+	mov	r6, r2
+	mrc	p15, 0, r0, c1, c0, 0
+	bic	r0, r0, #(1 << 2)	/* C off */
+	mcr	p15, 0, r0, c1, c0, 0
+	isb
+	mov	r0, #1
+	bl	dcache_setway_regs	/* clean+invalidate, no stack */
+	mrc	p15, 0, r0, c1, c0, 0
+	bic	r0, r0, #(1 << 0)	/* M */
+	bic	r0, r0, #(1 << 11)	/* Z */
+	bic	r0, r0, #(1 << 12)	/* I */
+	mcr	p15, 0, r0, c1, c0, 0
+	isb
+	mov	r0, #0
+	mcr	p15, 0, r0, c7, c5, 0	/* ICIALLU */
+	mcr	p15, 0, r0, c7, c5, 6	/* BPIALL */
+	mcr	p15, 0, r0, c8, c7, 0	/* TLBIALL */
+	dsb
+	isb
+	str	r6, [r5]		/* status word: "PRKD" */
+	dsb
+	bx	r4			/* park loop (ARM code in OCM) */
+	.size cpu_park, . - cpu_park

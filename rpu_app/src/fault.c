@@ -1,0 +1,55 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * fault.c - fatal exceptions (undefined instruction, SVC, aborts, FIQ).
+ *
+ * The report goes to the trace buffer and the UART, the status word
+ * becomes "CRSH" (an extension of the stop contract: Linux can see the
+ * firmware died instead of waiting for a heartbeat timeout), and the core
+ * then keeps honouring the cooperative stop: on STOP it releases its
+ * interrupts, stops its timer and parks like a normal stop, so a crashed
+ * firmware can be stopped and restarted without a reset.
+ */
+#include <stdint.h>
+
+#include "arch.h"
+#include "board.h"
+#include "gic.h"
+#include "irq.h"
+#include "log.h"
+#include "servo.h"
+#include "ttc.h"
+
+static const char *const kind_name[] = {
+	"?", "undefined instruction", "SVC", "prefetch abort", "data abort", "FIQ",
+};
+
+static volatile uint32_t in_fault;
+
+void fault_report(uint32_t kind, const uint32_t *frame)
+{
+	/* frame: spsr, r0..r12, return address (faulting instruction). */
+	mmio_write32(BOARD_STOP_STATUS_ADDR, STOP_STAT_CRSH);
+	dsb();
+	if (!in_fault) {
+		in_fault = 1;
+		log_printf("FAULT: %s at pc=%08x spsr=%08x mode=%02x nest=%u\n",
+			   kind_name[kind < 6u ? kind : 0u], (unsigned)frame[14], (unsigned)frame[0],
+			   (unsigned)(frame[0] & 0x1fu), (unsigned)irq_nest_now());
+		log_printf("FAULT: dfsr=%08x dfar=%08x ifsr=%08x ifar=%08x\n",
+			   (unsigned)CP15_READ(0, c5, c0, 0), (unsigned)CP15_READ(0, c6, c0, 0),
+			   (unsigned)CP15_READ(0, c5, c0, 1), (unsigned)CP15_READ(0, c6, c0, 2));
+		for (unsigned i = 0; i < 13u; i += 4u)
+			log_printf("FAULT: r%u..: %08x %08x %08x %08x\n", i,
+				   (unsigned)frame[1 + i], (unsigned)(i + 1u < 13u ? frame[2 + i] : 0u),
+				   (unsigned)(i + 2u < 13u ? frame[3 + i] : 0u),
+				   (unsigned)(i + 3u < 13u ? frame[4 + i] : 0u));
+		log_printf("FAULT: waiting for STOP at %p\n", (void *)(uintptr_t)BOARD_STOP_CONTROL_ADDR);
+		log_flush();
+	}
+	for (;;) {
+		if (mmio_read32(BOARD_STOP_CONTROL_ADDR) == STOP_CTRL_STOP) {
+			in_fault = 0;
+			servo_quiesce_and_park();
+		}
+	}
+}

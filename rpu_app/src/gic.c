@@ -1,0 +1,115 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * gic.c - this core's use of the shared GIC.
+ *
+ * Rules (docs/platform-notes.md, GIC pitfalls):
+ *  - never write GICD_CTLR (Linux owns the distributor);
+ *  - touch only the firmware's own interrupts: byte accesses for
+ *    IPRIORITYR/ITARGETSR, write-1 registers (ISENABLER/ICENABLER/
+ *    ICPENDR) with only the own bit set; ICFGR is word-only and shared by
+ *    16 interrupts, so it is read and written back only if the own field
+ *    must change (race window documented in rpu_app/README.md);
+ *  - SPIs target this core only (ITARGETSR = 1 << MPIDR.Aff0, 0x02 on
+ *    CPU1), never both cores;
+ *  - enable only this core's CPU interface (banked GICC registers).
+ */
+#include "arch.h"
+#include "board.h"
+#include "gic.h"
+
+#define GICD_CTLR        0x000u
+#define GICD_ISENABLER   0x100u
+#define GICD_ICENABLER   0x180u
+#define GICD_ICPENDR     0x280u
+#define GICD_IPRIORITYR  0x400u
+#define GICD_ITARGETSR   0x800u
+#define GICD_ICFGR       0xc00u
+#define GICD_SGIR        0xf00u
+
+#define GICC_CTLR 0x00u
+#define GICC_PMR  0x04u
+#define GICC_BPR  0x08u
+#define GICC_IAR  0x0cu
+#define GICC_EOIR 0x10u
+#define GICC_RPR  0x14u
+
+#define D(off) (BOARD_GICD_BASE + (off))
+#define C(off) (BOARD_GICC_BASE + (off))
+
+int gic_dist_enabled(void)
+{
+	return (mmio_read32(D(GICD_CTLR)) & 1u) != 0;
+}
+
+void gic_cpu_init(uint32_t pmr, uint32_t bpr)
+{
+	mmio_write32(C(GICC_CTLR), 0);
+	mmio_write32(C(GICC_PMR), pmr);
+	mmio_write32(C(GICC_BPR), bpr);
+	mmio_write32(C(GICC_CTLR), 1u);
+	dsb();
+}
+
+void gic_cpu_disable(void)
+{
+	mmio_write32(C(GICC_CTLR), 0);
+	mmio_write32(C(GICC_PMR), 0);
+	dsb();
+}
+
+void gic_irq_config(uint32_t id, uint32_t prio, int level)
+{
+	uint32_t bit = 1u << (id & 31u);
+
+	mmio_write32(D(GICD_ICENABLER + 4u * (id / 32u)), bit);
+	dsb();
+	mmio_write8(D(GICD_IPRIORITYR + id), (uint8_t)prio);
+	if (id >= 32u) {
+		uint32_t reg = D(GICD_ICFGR + 4u * (id / 16u));
+		uint32_t shift = 2u * (id & 15u) + 1u;	/* bit 1 of the field: edge */
+		uint32_t v = mmio_read32(reg);
+		uint32_t want = level ? (v & ~(1u << shift)) : (v | (1u << shift));
+
+		if (want != v)
+			mmio_write32(reg, want);
+		mmio_write8(D(GICD_ITARGETSR + id), (uint8_t)(1u << mpidr_cpu()));
+	}
+	mmio_write32(D(GICD_ICPENDR + 4u * (id / 32u)), bit);
+	dsb();
+}
+
+void gic_irq_enable(uint32_t id)
+{
+	mmio_write32(D(GICD_ISENABLER + 4u * (id / 32u)), 1u << (id & 31u));
+	dsb();
+}
+
+void gic_irq_disable(uint32_t id)
+{
+	mmio_write32(D(GICD_ICENABLER + 4u * (id / 32u)), 1u << (id & 31u));
+	dsb();
+	mmio_write32(D(GICD_ICPENDR + 4u * (id / 32u)), 1u << (id & 31u));
+	dsb();
+}
+
+uint32_t gic_ack(void)
+{
+	return mmio_read32(C(GICC_IAR));
+}
+
+void gic_eoi(uint32_t iar)
+{
+	mmio_write32(C(GICC_EOIR), iar);
+}
+
+uint32_t gic_running_priority(void)
+{
+	return mmio_read32(C(GICC_RPR)) & 0xffu;
+}
+
+void gic_sgi_self(uint32_t id)
+{
+	dsb();
+	/* TargetListFilter = 0b10: this core only. */
+	mmio_write32(D(GICD_SGIR), (2u << 24) | (id & 15u));
+}

@@ -1,0 +1,191 @@
+/* SPDX-License-Identifier: MIT */
+#include <stddef.h>
+#include <stdint.h>
+
+#include "arch.h"
+#include "gic.h"
+#include "irq.h"
+
+#ifndef IRQ_NESTING
+#define IRQ_NESTING 1
+#endif
+
+#define NEST_MAX 8u
+#define DEFAULT_PRIORITY 0xa0u
+
+struct irq_desc {
+	irq_handler_t handler;
+	irq_clear_t clear;
+	irq_latency_t latency;
+	void *arg;
+	uint8_t trigger;
+	uint8_t registered;
+	uint8_t enabled;
+	uint8_t prio;
+	struct irq_stats st;
+};
+
+static struct irq_desc idt[IRQ_MAX_ID];
+static volatile uint32_t nest;
+static uint32_t nest_max;
+static uint32_t in_service[NEST_MAX];	/* IAR values, outermost first */
+static uint32_t spurious, unhandled;
+
+void irq_init(void)
+{
+	for (uint32_t i = 0; i < IRQ_MAX_ID; i++)
+		idt[i] = (struct irq_desc){ 0 };
+	nest = 0;
+	nest_max = 0;
+	spurious = unhandled = 0;
+}
+
+int irq_register(uint32_t id, irq_handler_t handler, irq_clear_t clear,
+		 enum irq_trigger trigger, void *arg)
+{
+	struct irq_desc *d;
+
+	if (id >= IRQ_MAX_ID || !handler || idt[id].registered)
+		return -1;
+	d = &idt[id];
+	d->handler = handler;
+	d->clear = clear;
+	d->latency = NULL;
+	d->arg = arg;
+	d->trigger = (uint8_t)trigger;
+	d->prio = DEFAULT_PRIORITY;
+	d->st = (struct irq_stats){ .lat_min_ns = UINT32_MAX };
+	d->registered = 1;
+	gic_irq_config(id, d->prio, trigger == IRQ_TRIGGER_LEVEL);
+	return 0;
+}
+
+int irq_set_priority(uint32_t id, uint32_t prio)
+{
+	if (id >= IRQ_MAX_ID || !idt[id].registered || prio > 0xffu)
+		return -1;
+	idt[id].prio = (uint8_t)prio;
+	gic_irq_config(id, prio, idt[id].trigger == IRQ_TRIGGER_LEVEL);
+	if (idt[id].enabled)
+		gic_irq_enable(id);
+	return 0;
+}
+
+int irq_set_latency_probe(uint32_t id, irq_latency_t probe)
+{
+	if (id >= IRQ_MAX_ID || !idt[id].registered)
+		return -1;
+	idt[id].latency = probe;
+	return 0;
+}
+
+int irq_enable(uint32_t id)
+{
+	if (id >= IRQ_MAX_ID || !idt[id].registered)
+		return -1;
+	idt[id].enabled = 1;
+	gic_irq_enable(id);
+	return 0;
+}
+
+void irq_release_all(void)
+{
+	uint32_t flags = irq_save();
+
+	for (uint32_t id = 0; id < IRQ_MAX_ID; id++) {
+		if (idt[id].registered) {
+			gic_irq_disable(id);
+			idt[id].enabled = 0;
+		}
+	}
+	/* Interrupts left active (e.g. a fault inside a handler): complete
+	 * them innermost first so the CPU interface is idle on restart. */
+	while (nest) {
+		nest--;
+		if (nest < NEST_MAX)
+			gic_eoi(in_service[nest]);
+	}
+	irq_restore(flags);
+}
+
+void irq_get_stats(uint32_t id, struct irq_stats *st)
+{
+	uint32_t flags = irq_save();
+
+	*st = id < IRQ_MAX_ID ? idt[id].st : (struct irq_stats){ 0 };
+	irq_restore(flags);
+}
+
+uint32_t irq_nest_max(void)
+{
+	return nest_max;
+}
+
+uint32_t irq_nest_now(void)
+{
+	return nest;
+}
+
+uint32_t irq_spurious(void)
+{
+	return spurious;
+}
+
+uint32_t irq_unhandled(void)
+{
+	return unhandled;
+}
+
+void irq_dispatch(void)
+{
+	uint32_t iar = gic_ack();
+	uint32_t id = iar & 0x3ffu;
+	uint32_t lat = IRQ_LATENCY_NONE, depth;
+	struct irq_desc *d;
+
+	if (id >= 1020u) {
+		spurious++;
+		return;		/* no EOI for a spurious ID */
+	}
+	d = id < IRQ_MAX_ID ? &idt[id] : NULL;
+	if (d && d->latency)
+		lat = d->latency(d->arg);
+
+	depth = ++nest;
+	if (depth <= NEST_MAX)
+		in_service[depth - 1u] = iar;
+	if (depth > nest_max)
+		nest_max = depth;
+
+	if (!d || !d->registered) {
+		/* Not ours: count it and complete it; never reconfigure it. */
+		unhandled++;
+	} else {
+		if (d->trigger == IRQ_TRIGGER_EDGE && d->clear)
+			d->clear(d->arg);
+#if IRQ_NESTING
+		cpu_irq_enable();
+#endif
+		d->handler(d->arg);
+#if IRQ_NESTING
+		cpu_irq_disable();
+#endif
+		if (d->trigger == IRQ_TRIGGER_LEVEL && d->clear)
+			d->clear(d->arg);
+
+		d->st.count++;
+		if (depth > d->st.nest_max)
+			d->st.nest_max = depth;
+		if (lat != IRQ_LATENCY_NONE) {
+			d->st.lat_n++;
+			d->st.lat_sum_ns += lat;
+			if (lat < d->st.lat_min_ns)
+				d->st.lat_min_ns = lat;
+			if (lat > d->st.lat_max_ns)
+				d->st.lat_max_ns = lat;
+		}
+	}
+	nest = depth - 1u;
+	dsb();
+	gic_eoi(iar);
+}

@@ -1,0 +1,61 @@
+/* SPDX-License-Identifier: MIT */
+#ifndef RPU_IRQ_H
+#define RPU_IRQ_H
+
+#include <stdint.h>
+
+/*
+ * Interrupt descriptor table (seed 002): one descriptor per GIC interrupt
+ * ID with a handler, a clear function (clears the flag at the source) and
+ * the trigger type; registered at init, dispatched by irq_dispatch().
+ *
+ * Order in the dispatcher (IRQs masked unless stated):
+ *   IAR read -> latency probe -> nesting count +1 ->
+ *   edge:  clear(), then the handler with IRQs unmasked (a new edge during
+ *          the handler is latched again by the GIC, none is lost);
+ *   level: the handler with IRQs unmasked, then clear() (the line must be
+ *          low before EOI or the GIC re-takes it at once);
+ *   statistics -> nesting count -1 -> EOI.
+ * With IRQ_NESTING (default 1) the handler runs with IRQs unmasked; the
+ * GIC's running priority lets only higher-priority interrupts (lower
+ * value, other group under BPR) preempt it, so a handler never re-enters
+ * itself and the depth is bounded by the number of priority groups used.
+ */
+#define IRQ_MAX_ID 96u			/* Zynq-7000 GIC: IDs 0..95 */
+#define IRQ_LATENCY_NONE 0xffffffffu
+
+enum irq_trigger { IRQ_TRIGGER_LEVEL = 0, IRQ_TRIGGER_EDGE = 1 };
+
+typedef void (*irq_handler_t)(void *arg);
+typedef void (*irq_clear_t)(void *arg);
+/* ns from the source's expected fire point to now, or IRQ_LATENCY_NONE. */
+typedef uint32_t (*irq_latency_t)(void *arg);
+
+struct irq_stats {
+	uint32_t count;
+	uint32_t lat_n;		/* samples with a latency */
+	uint32_t lat_min_ns;
+	uint32_t lat_max_ns;
+	uint64_t lat_sum_ns;
+	uint32_t nest_max;	/* deepest nesting seen when this one entered */
+};
+
+void irq_init(void);
+/* 0, or -1 if id is out of range / already registered. */
+int irq_register(uint32_t id, irq_handler_t handler, irq_clear_t clear,
+		 enum irq_trigger trigger, void *arg);
+int irq_set_priority(uint32_t id, uint32_t prio);
+int irq_set_latency_probe(uint32_t id, irq_latency_t probe);
+int irq_enable(uint32_t id);
+/* Stop path: disable every registered interrupt, EOI any still in service. */
+void irq_release_all(void);
+
+void irq_get_stats(uint32_t id, struct irq_stats *st);
+uint32_t irq_nest_max(void);
+uint32_t irq_nest_now(void);
+uint32_t irq_spurious(void);
+uint32_t irq_unhandled(void);
+
+void irq_dispatch(void);	/* called by irq_entry (start.S) */
+
+#endif

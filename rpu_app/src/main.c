@@ -1,0 +1,268 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * main.c - rpu_app, the servoamp servo firmware on the second Cortex-A9.
+ *
+ * Start: MMU/caches, logger + banner, GIC CPU interface, interrupt
+ * descriptor table (cycle interrupt from the TTC, nesting self-test SGI),
+ * amp_lib link, "RUN!". Main loop: cooperative stop, attach retries,
+ * statistics, UART draining, WFI between cycles.
+ */
+#include <stdint.h>
+
+#include "arch.h"
+#include "board.h"
+#include "gic.h"
+#include "gtimer.h"
+#include "irq.h"
+#include "link.h"
+#include "log.h"
+#include "mmu.h"
+#include "servo.h"
+#include "ttc.h"
+#include "uart.h"
+#include "variant.h"
+
+#include "rpu_version.h"	/* generated: RPU_VERSION, RPU_GIT, RPU_BUILD_DATE */
+#ifndef CONFIG_MMU
+#define CONFIG_MMU 1
+#endif
+#ifndef CONFIG_IDLE_WFI
+#define CONFIG_IDLE_WFI 1
+#endif
+
+#define GIC_PMR 0xf0u		/* accept every priority above 0xf0 */
+#define GIC_BPR 2u		/* group priority = bits [7:3]: 32 groups */
+#define NS_PER_GT_TICK (1000u / BOARD_GTIMER_TICKS_PER_US)
+
+extern uint32_t __stacks_start[], __svc_stack_top[], __svc_stack_bottom[];
+extern char __image_end[];
+
+/* Cycle state: written by the cycle handler, read by the main loop. */
+static volatile uint32_t cycles;
+static uint32_t last_gt;
+static uint32_t period_min, period_max, overruns, missed;
+static volatile uint32_t sgi_stamp, sgi_seen;
+static uint32_t nest_ok, nest_fail;
+static uint64_t gt_start;
+
+static void nest_test_handler(void *arg)
+{
+	(void)arg;
+	sgi_seen++;
+}
+
+static uint32_t nest_test_latency(void *arg)
+{
+	(void)arg;
+	return (gtimer_now32() - sgi_stamp) * NS_PER_GT_TICK;
+}
+
+static void cycle_handler(void *arg)
+{
+	uint32_t now = gtimer_now32();
+	uint32_t c = cycles;
+
+	(void)arg;
+	if (c) {
+		uint32_t d = (now - last_gt) * NS_PER_GT_TICK;
+
+		if (d < period_min)
+			period_min = d;
+		if (d > period_max)
+			period_max = d;
+		if (d > BOARD_CYCLE_PERIOD_NS + BOARD_CYCLE_PERIOD_NS / 2u) {
+			/* Late by more than half a period: interval events
+			 * merged (the TTC flag is a level, cleared once). */
+			overruns++;
+			missed += (d + BOARD_CYCLE_PERIOD_NS / 2u) / BOARD_CYCLE_PERIOD_NS - 1u;
+		}
+	}
+	last_gt = now;
+	cycles = c + 1u;
+	link_cycle();
+
+	/* Nesting self-test, once per statistics interval: a higher-priority
+	 * SGI to this core must preempt this handler before it returns. */
+	if ((c + 1u) % BOARD_STATS_CYCLES == BOARD_STATS_CYCLES / 2u) {
+		uint32_t before = sgi_seen;
+
+		sgi_stamp = gtimer_now32();
+		gic_sgi_self(BOARD_NEST_TEST_SGI);
+		for (uint32_t i = 0; i < 10000u && sgi_seen == before; i++)
+			compiler_barrier();
+		if (sgi_seen != before)
+			nest_ok++;
+		else
+			nest_fail++;
+	}
+}
+
+static uint32_t stack_used(uint32_t *bottom, uint32_t *top)
+{
+	uint32_t *p = bottom;
+
+	while (p < top && *p == 0x5354434bu)
+		p++;
+	return (uint32_t)((uintptr_t)top - (uintptr_t)p);
+}
+
+static void print_irq_stats(uint32_t id)
+{
+	struct irq_stats st;
+	uint32_t mean;
+
+	irq_get_stats(id, &st);
+	mean = st.lat_n ? (uint32_t)(st.lat_sum_ns / st.lat_n) : 0u;
+	log_printf("stats irq=%u count=%u lat_min_ns=%u lat_mean_ns=%u lat_max_ns=%u nest_max=%u\n",
+		   (unsigned)id, (unsigned)st.count, (unsigned)(st.lat_n ? st.lat_min_ns : 0u),
+		   (unsigned)mean, (unsigned)st.lat_max_ns, (unsigned)st.nest_max);
+}
+
+static void print_stats(void)
+{
+	struct log_stats ls;
+	uint32_t flags = irq_save();
+	uint32_t c = cycles, pmin = period_min, pmax = period_max, ovr = overruns, mis = missed;
+
+	irq_restore(flags);
+	log_get_stats(&ls);
+	log_printf("stats cycle=%u guest_us=%u period_min_ns=%u period_max_ns=%u overruns=%u missed=%u nest_max=%u "
+		   "nest_test_ok=%u nest_test_fail=%u\n",
+		   (unsigned)c, (unsigned)((gtimer_now() - gt_start) / BOARD_GTIMER_TICKS_PER_US),
+		   (unsigned)(c > 1u ? pmin : 0u), (unsigned)pmax, (unsigned)ovr, (unsigned)mis,
+		   (unsigned)irq_nest_max(), (unsigned)nest_ok, (unsigned)nest_fail);
+	print_irq_stats(BOARD_CYCLE_IRQ);
+	print_irq_stats(BOARD_NEST_TEST_SGI);
+	log_printf("stats link=%s attached=%d hb=%u spurious=%u unhandled=%u trace_wraps=%u "
+		   "uart_dropped=%u svc_stack_used=%u\n",
+		   link_backend(), link_attached(), (unsigned)link_heartbeat(),
+		   (unsigned)irq_spurious(), (unsigned)irq_unhandled(), (unsigned)ls.trace_wraps,
+		   (unsigned)ls.uart_dropped,
+		   (unsigned)stack_used(__svc_stack_bottom, __svc_stack_top));
+}
+
+static int stop_requested(void)
+{
+	return mmio_read32(BOARD_STOP_CONTROL_ADDR) == STOP_CTRL_STOP;
+}
+
+__attribute__((noreturn)) void servo_quiesce_and_park(void)
+{
+	cpu_irq_disable();
+	ttc_cycle_stop();
+	irq_release_all();
+	gic_cpu_disable();
+	log_printf("stop: STOP seen after %u cycles; interrupts released, timer stopped; parking at %p\n",
+		   (unsigned)cycles, (void *)(uintptr_t)BOARD_PARK_ADDR);
+	log_flush();
+	/* Caches cleaned and MMU off inside cpu_park (cpu.S), then PRKD. */
+	cpu_park(BOARD_PARK_ADDR, BOARD_STOP_STATUS_ADDR, STOP_STAT_PRKD);
+}
+
+static void banner(void)
+{
+	log_printf("servoamp rpu_app %s (%s, built %s, gcc %s) board=%s variant=%s\n",
+		   RPU_VERSION, RPU_GIT, RPU_BUILD_DATE, __VERSION__, BOARD_NAME, rpu_variant);
+}
+
+__attribute__((noreturn)) void servo_main(void)
+{
+	uint32_t gt_ps, last_stats = 0, slept_at = 0;
+	int uart_ok;
+
+	cycles = 0;
+	last_gt = 0;
+	period_min = UINT32_MAX;
+	period_max = overruns = missed = 0;
+	sgi_stamp = sgi_seen = 0;
+	nest_ok = nest_fail = 0;
+
+#if CONFIG_MMU
+	mmu_init();
+#endif
+	log_init();
+	uart_ok = uart_init() == 0;
+	banner();	/* always the first line, on both sinks */
+	if (!uart_ok)
+		log_printf("uart: console UART clock gated in SLCR; logging to trace only\n");
+	log_printf("cpu%u: mpidr=%08x vbar=%08x sctlr=%08x mmu=%s\n",
+		   (unsigned)mpidr_cpu(), (unsigned)CP15_READ(0, c0, c0, 5),
+		   (unsigned)CP15_READ(0, c12, c0, 0), (unsigned)CP15_READ(0, c1, c0, 0),
+		   mmu_enabled() ? "on (L1 I+D, carveout inner-WB, OCM/trace non-cacheable)" : "off");
+	log_printf("memory: image %p..%p carveout %08x+%08x trace %p+%u amp %08x+%08x\n",
+		   (void *)BOARD_IMAGE_BASE, (void *)__image_end, (unsigned)BOARD_CARVEOUT_BASE,
+		   (unsigned)BOARD_CARVEOUT_SIZE, (void *)trace_buf, (unsigned)BOARD_TRACE_SIZE,
+		   (unsigned)BOARD_AMP_BASE, (unsigned)BOARD_AMP_SIZE);
+	if (mpidr_cpu() != BOARD_CPU_ID)
+		log_printf("warning: running on cpu%u, devicetree says cpu%u\n",
+			   (unsigned)mpidr_cpu(), (unsigned)BOARD_CPU_ID);
+	if (gtimer_init(&gt_ps))
+		log_printf("warning: global timer stopped (Linux starts it): tick-based figures are wrong\n");
+	else if (gt_ps)
+		log_printf("gtimer: prescaler %u set by its owner; ticks scaled by %u to %u MHz units\n",
+			   (unsigned)gt_ps, (unsigned)(gt_ps + 1u), (unsigned)BOARD_GTIMER_TICKS_PER_US);
+	log_flush();
+
+	irq_init();
+	if (!gic_dist_enabled())
+		log_printf("warning: GIC distributor disabled (owned by Linux, not enabled here); "
+			   "no interrupt until it is\n");
+	if (gic_running_priority() != 0xffu)
+		log_printf("warning: CPU interface busy at priority %02x on entry\n",
+			   (unsigned)gic_running_priority());
+	gic_cpu_init(GIC_PMR, GIC_BPR);
+
+	if (irq_register(BOARD_CYCLE_IRQ, cycle_handler, ttc_cycle_clear,
+			 BOARD_CYCLE_IRQ_LEVEL ? IRQ_TRIGGER_LEVEL : IRQ_TRIGGER_EDGE, 0) ||
+	    irq_set_priority(BOARD_CYCLE_IRQ, BOARD_CYCLE_PRIORITY) ||
+	    irq_set_latency_probe(BOARD_CYCLE_IRQ, ttc_cycle_since_fire_ns) ||
+	    irq_register(BOARD_NEST_TEST_SGI, nest_test_handler, 0, IRQ_TRIGGER_EDGE, 0) ||
+	    irq_set_priority(BOARD_NEST_TEST_SGI, BOARD_NEST_TEST_PRIORITY) ||
+	    irq_set_latency_probe(BOARD_NEST_TEST_SGI, nest_test_latency))
+		log_printf("error: interrupt registration failed\n");
+
+	link_init();
+	gt_start = gtimer_now();
+	ttc_cycle_start();
+	irq_enable(BOARD_NEST_TEST_SGI);
+	irq_enable(BOARD_CYCLE_IRQ);
+	cpu_irq_enable();
+
+	log_printf("cycle: irq %u (%s) prio %02x, ttc %08x counter %u, period %u us "
+		   "(interval %u, prescaler %s/%u); nest test: sgi %u prio %02x\n",
+		   (unsigned)BOARD_CYCLE_IRQ, BOARD_CYCLE_IRQ_LEVEL ? "level" : "edge",
+		   (unsigned)BOARD_CYCLE_PRIORITY, (unsigned)BOARD_TTC_BASE,
+		   (unsigned)BOARD_CYCLE_COUNTER, (unsigned)BOARD_CYCLE_PERIOD_US,
+		   (unsigned)BOARD_CYCLE_INTERVAL, BOARD_CYCLE_PS_EN ? "on" : "off",
+		   (unsigned)(BOARD_CYCLE_PS_EN ? 2u << BOARD_CYCLE_PS_V : 1u),
+		   (unsigned)BOARD_NEST_TEST_SGI, (unsigned)BOARD_NEST_TEST_PRIORITY);
+
+	mmio_write32(BOARD_STOP_STATUS_ADDR, STOP_STAT_RUN);
+	dsb();
+	log_printf("running: status %p = RUN!, polling stop word %p\n",
+		   (void *)(uintptr_t)BOARD_STOP_STATUS_ADDR, (void *)(uintptr_t)BOARD_STOP_CONTROL_ADDR);
+
+	for (;;) {
+		uint32_t c;
+
+		if (stop_requested())
+			servo_quiesce_and_park();
+		log_poll();
+		c = cycles;
+		link_poll(c);
+		if (c - last_stats >= BOARD_STATS_CYCLES) {
+			last_stats = c;
+			print_stats();
+			if (gtimer_changed())
+				log_printf("warning: global timer prescaler changed by its owner\n");
+		}
+		/* Sleep until the next interrupt, but only while cycle
+		 * interrupts keep arriving (one came since the last sleep) and
+		 * the distributor is enabled by its owner: if they stop, the
+		 * loop falls back to polling so STOP is still seen. */
+		if (CONFIG_IDLE_WFI && c != slept_at && gic_dist_enabled()) {
+			slept_at = c;
+			wfi();
+		}
+	}
+}

@@ -1,0 +1,16 @@
+/* SPDX-License-Identifier: MIT */
+#ifndef RPU_SERVO_H
+#define RPU_SERVO_H
+
+#include <stdint.h>
+
+/* Entry from start.S (C environment ready: stacks, .bss cleared). */
+__attribute__((noreturn)) void servo_main(void);
+/* Fatal exception report (start.S FAULT_ENTRY); waits for STOP. */
+__attribute__((noreturn)) void fault_report(uint32_t kind, const uint32_t *frame);
+
+/* Stop path shared by the main loop and the fault handler. */
+__attribute__((noreturn)) void servo_quiesce_and_park(void);
+__attribute__((noreturn)) void cpu_park(uint32_t park, uint32_t status_addr, uint32_t status);
+
+#endif

@@ -1,0 +1,85 @@
+# SPDX-License-Identifier: MIT
+"""Fixtures for rpu_app tests: one build of both firmware variants per test
+session, into the session's temporary directory (never into build/, which
+other tools use concurrently)."""
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parents[1]
+BOARD = "zynq7000_qemu"
+sys.path.insert(0, str(HERE))
+
+# The board contract (fixed numbers shared with the Linux/remoteproc side).
+CONTRACT = {
+    "BOARD_CARVEOUT_BASE": 0x1F000000,
+    "BOARD_CARVEOUT_SIZE": 0x01000000,
+    "BOARD_OCM_BASE": 0xFFFC0000,
+    "BOARD_OCM_SIZE": 0x00040000,
+    "BOARD_PARK_ADDR": 0xFFFC0100,
+    "BOARD_BOOT_REG_ADDR": 0xFFFFFFF0,
+    "BOARD_AMP_BASE": 0xFFFF0000,
+    "BOARD_AMP_SIZE": 0x00008000,
+    "BOARD_STOP_CONTROL_ADDR": 0xFFFF8000,
+    "BOARD_STOP_STATUS_ADDR": 0xFFFF8004,
+    "BOARD_UART_BASE": 0xE0001000,
+    "BOARD_TTC_BASE": 0xF8002000,
+    "BOARD_CYCLE_IRQ": 69,
+    "BOARD_GICD_BASE": 0xF8F01000,
+    "BOARD_GICC_BASE": 0xF8F00100,
+    "BOARD_GTIMER_BASE": 0xF8F00200,
+}
+STOP, RUN, PRKD, CRSH = 0x53544F50, 0x52554E21, 0x50524B44, 0x48535243
+
+
+def parse_board_config(path: Path) -> dict[str, int]:
+    cfg = {}
+    for m in re.finditer(r"^#define (BOARD_\w+) BOARD_U\((0x[0-9a-fA-F]+|\d+)\)", path.read_text(), re.M):
+        cfg[m.group(1)] = int(m.group(2), 0)
+    return cfg
+
+
+def _make(build: Path, *extra: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        ["make", "-C", str(REPO / "rpu_app"), "-j2", f"BOARD={BOARD}", f"BUILD={build}",
+         f"PYTHON={sys.executable}", *extra],
+        capture_output=True, text=True)
+
+
+@pytest.fixture(scope="session")
+def toolchain():
+    if not shutil.which("arm-none-eabi-gcc"):
+        pytest.skip("arm-none-eabi-gcc missing: run scripts/bootstrap.sh")
+
+
+@pytest.fixture(scope="session")
+def rpu_build(tmp_path_factory, toolchain) -> Path:
+    build = tmp_path_factory.mktemp("rpu_app") / BOARD
+    r = _make(build)
+    assert r.returncode == 0, f"make failed:\n{r.stdout}\n{r.stderr}"
+    for name in ("servo.elf", "servo-norsc.elf", "qemu-stub.elf", "board_config.h", "board_memory.ld"):
+        assert (build / name).is_file(), name
+    return build
+
+
+@pytest.fixture(scope="session")
+def board_cfg(rpu_build) -> dict[str, int]:
+    return parse_board_config(rpu_build / "board_config.h")
+
+
+def qemu_ok() -> str | None:
+    q = shutil.which("qemu-system-arm")
+    if not q:
+        return "qemu-system-arm missing: run scripts/bootstrap.sh"
+    out = subprocess.run([q, "--version"], capture_output=True, text=True).stdout
+    m = re.search(r"version (\d+)\.(\d+)", out)
+    if not m or (int(m.group(1)), int(m.group(2))) < (9, 1):
+        return f"qemu-system-arm >= 9.1 needed (-smp 2 on xilinx-zynq-a9), found: {out.splitlines()[0] if out else '?'}"
+    return None
