@@ -14,21 +14,9 @@ log() { printf '[bootstrap] %s\n' "$*"; }
 sudo_cmd=""
 [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
 
-# The Debian mirror this machine already uses: read from its own apt
-# configuration so that no host name is ever written into the repository.
-debian_mirror() {
-	local f uri=""
-	for f in /etc/apt/sources.list.d/*.sources; do
-		[ -r "$f" ] || continue
-		uri=$(awk '/^URIs:/ { for (i = 2; i <= NF; i++) if ($i !~ /security/) { print $i; exit } }' "$f")
-		[ -n "$uri" ] && break
-	done
-	if [ -z "$uri" ] && [ -r /etc/apt/sources.list ]; then
-		uri=$(awk '$1 == "deb" && $0 !~ /security/ { for (i = 2; i <= NF; i++) if ($i ~ /^[a-z]+:\/\//) { print $i; exit } }' /etc/apt/sources.list)
-	fi
-	[ -n "$uri" ] || { echo "bootstrap: cannot find the Debian mirror in /etc/apt" >&2; return 1; }
-	printf '%s\n' "${uri%/}"
-}
+# The Debian mirror this machine already uses, read from its own apt
+# configuration: no host name is ever written into the repository.
+. "$here/scripts/lib/debian-mirror.sh"
 
 apt_host=(build-essential gcc make pkg-config python3-venv git
 	gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi)

@@ -110,6 +110,36 @@ uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed)
 	return AMP_RX_MISSED;
 }
 
+int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
+		   uint32_t naxes_word, uint32_t pub, uint32_t last, uint32_t epoch,
+		   struct amp_rx_info *rx, struct amp_stats *st)
+{
+	const uint32_t *rec = (const uint32_t *)bufs + (pub & 1u) * words;
+	const uint32_t *t = tmp;
+	int take = 0;
+
+	rx->status = amp__rx_classify(pub, last, &rx->missed);
+	if (rx->status == AMP_RX_FRESH || rx->status == AMP_RX_MISSED) {
+		if (amp__rec_read(tmp, rec, words, end, pub) != 0)
+			rx->status = AMP_RX_TORN;
+		else if (t[1] != epoch || t[naxes_word] > AMP_MAX_AXES)
+			rx->status = AMP_RX_INVALID;
+		else
+			take = 1;
+		if (!take)
+			rx->missed = 0;
+	}
+	rx->seq = take ? pub : last;
+	switch (rx->status) {
+	case AMP_RX_FRESH: st->fresh++; break;
+	case AMP_RX_MISSED: st->fresh++; st->missed += rx->missed; break;
+	case AMP_RX_STALE: st->stale++; break;
+	case AMP_RX_TORN: st->torn++; break;
+	default: st->invalid++; break;
+	}
+	return take;
+}
+
 void amp__bytes_in(void *dst, const void *ocm_src, uint32_t len)
 {
 	uint8_t *d = dst;

@@ -30,6 +30,14 @@ void amp__frame_put(struct amp_frame *f, struct amp_frame_hdr *h,
 
 #define AMP_REC_WORDS(type) ((uint32_t)(sizeof(type) / 4u))
 #define AMP_REC_END(type)   ((uint32_t)(offsetof(type, seq_end) / 4u))
+#define AMP_REC_NAXES(type) ((uint32_t)(offsetof(type, n_axes) / 4u))
+
+#define FB_WORDS  AMP_REC_WORDS(struct amp_fb_record)
+#define FB_END    AMP_REC_END(struct amp_fb_record)
+#define FB_NAXES  AMP_REC_NAXES(struct amp_fb_record)
+#define CMD_WORDS AMP_REC_WORDS(struct amp_cmd_record)
+#define CMD_END   AMP_REC_END(struct amp_cmd_record)
+#define CMD_NAXES AMP_REC_NAXES(struct amp_cmd_record)
 
 /*
  * Double-buffered record write/read. words = record size in 32-bit
@@ -43,6 +51,17 @@ int amp__rec_read(void *dst, const void *ocm_rec, uint32_t words,
 
 /* Classify a published sequence against the last one read. */
 uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed);
+
+/*
+ * The reader's step for a periodic record: classify pub against last,
+ * copy the record (buffer pub & 1 of the pair at bufs) into tmp, check it
+ * is whole, of this epoch (word 1) and with an axis count (word
+ * naxes_word) within AMP_MAX_AXES; fill rx and count the outcome in st.
+ * Returns 1 if tmp holds a new record the caller must take, else 0.
+ */
+int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
+		   uint32_t naxes_word, uint32_t pub, uint32_t last, uint32_t epoch,
+		   struct amp_rx_info *rx, struct amp_stats *st);
 
 /* CRC of a frame header (crc32 field taken as 0) and its payload. */
 uint32_t amp__frame_crc(const struct amp_frame_hdr *h, const void *payload);

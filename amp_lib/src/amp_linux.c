@@ -5,11 +5,6 @@
  */
 #include "amp_internal.h"
 
-#define FB_WORDS  AMP_REC_WORDS(struct amp_fb_record)
-#define FB_END    AMP_REC_END(struct amp_fb_record)
-#define CMD_WORDS AMP_REC_WORDS(struct amp_cmd_record)
-#define CMD_END   AMP_REC_END(struct amp_cmd_record)
-
 int amp_linux_init(struct amp_linux *l, void *base, uint32_t size, uint32_t wd_limit)
 {
 	struct amp_ocm *o = base;
@@ -91,26 +86,10 @@ static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx)
 
 	AMP_PORT_CACHE_INVAL(&o->servo_line, sizeof(o->servo_line));
 	pub = RD_ACQ(&o->servo_line.fb_pub);
-	rx->status = amp__rx_classify(pub, l->fb_seq, &rx->missed);
-	if (rx->status == AMP_RX_FRESH || rx->status == AMP_RX_MISSED) {
-		if (amp__rec_read(&f, &o->fb[pub & 1u], FB_WORDS, FB_END, pub) != 0) {
-			rx->status = AMP_RX_TORN;
-			rx->missed = 0;
-		} else if (f.epoch != l->epoch || f.n_axes > AMP_MAX_AXES) {
-			rx->status = AMP_RX_INVALID;
-			rx->missed = 0;
-		} else {
-			l->fb = f;
-			l->fb_seq = pub;
-		}
-	}
-	rx->seq = l->fb_seq;
-	switch (rx->status) {
-	case AMP_RX_FRESH: l->st.fresh++; break;
-	case AMP_RX_STALE: l->st.stale++; break;
-	case AMP_RX_TORN: l->st.torn++; break;
-	case AMP_RX_MISSED: l->st.fresh++; l->st.missed += rx->missed; break;
-	default: l->st.invalid++; break;
+	if (amp__rx_record(&f, o->fb, FB_WORDS, FB_END, FB_NAXES, pub, l->fb_seq,
+			   l->epoch, rx, &l->st)) {
+		l->fb = f;
+		l->fb_seq = pub;
 	}
 }
 

@@ -7,11 +7,6 @@
  */
 #include "amp_internal.h"
 
-#define FB_WORDS  AMP_REC_WORDS(struct amp_fb_record)
-#define FB_END    AMP_REC_END(struct amp_fb_record)
-#define CMD_WORDS AMP_REC_WORDS(struct amp_cmd_record)
-#define CMD_END   AMP_REC_END(struct amp_cmd_record)
-
 int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size)
 {
 	struct amp_ocm *o = base;
@@ -109,26 +104,10 @@ int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_i
 	}
 
 	/* 3. switch the command buffer: read the newest commands */
-	rx->status = amp__rx_classify(pub, s->cmd_seq, &rx->missed);
-	if (rx->status == AMP_RX_FRESH || rx->status == AMP_RX_MISSED) {
-		if (amp__rec_read(&c, &o->cmd[pub & 1u], CMD_WORDS, CMD_END, pub) != 0) {
-			rx->status = AMP_RX_TORN;
-			rx->missed = 0;
-		} else if (c.epoch != s->epoch || c.n_axes > AMP_MAX_AXES) {
-			rx->status = AMP_RX_INVALID;
-			rx->missed = 0;
-		} else {
-			s->cmd = c;
-			s->cmd_seq = pub;
-		}
-	}
-	rx->seq = s->cmd_seq;
-	switch (rx->status) {
-	case AMP_RX_FRESH: s->st.fresh++; break;
-	case AMP_RX_MISSED: s->st.fresh++; s->st.missed += rx->missed; break;
-	case AMP_RX_STALE: s->st.stale++; break;
-	case AMP_RX_TORN: s->st.torn++; break;
-	default: s->st.invalid++; break;
+	if (amp__rx_record(&c, o->cmd, CMD_WORDS, CMD_END, CMD_NAXES, pub, s->cmd_seq,
+			   s->epoch, rx, &s->st)) {
+		s->cmd = c;
+		s->cmd_seq = pub;
 	}
 	if (rx->status != AMP_RX_FRESH) {
 		WR(&o->servo_line.cmd_stale, s->st.stale + s->st.torn + s->st.invalid);

@@ -45,19 +45,7 @@ for f in "${firmware[@]}"; do [ -f "$f" ] || die "firmware $f not found"; done
 gen_init_cpio=$repo/build/kernel/obj/usr/gen_init_cpio
 [ -x "$gen_init_cpio" ] || die "$gen_init_cpio missing: run linux/kernel/build.sh first"
 
-debian_mirror() {
-	local f uri=""
-	for f in /etc/apt/sources.list.d/*.sources; do
-		[ -r "$f" ] || continue
-		uri=$(awk '/^URIs:/ { for (i = 2; i <= NF; i++) if ($i !~ /security/) { print $i; exit } }' "$f")
-		[ -n "$uri" ] && break
-	done
-	if [ -z "$uri" ] && [ -r /etc/apt/sources.list ]; then
-		uri=$(awk '$1 == "deb" && $0 !~ /security/ { for (i = 2; i <= NF; i++) if ($i ~ /^[a-z]+:\/\//) { print $i; exit } }' /etc/apt/sources.list)
-	fi
-	[ -n "$uri" ] || die "cannot find the Debian mirror in /etc/apt"
-	printf '%s\n' "${uri%/}"
-}
+. "$repo/scripts/lib/debian-mirror.sh"
 
 # 1. busybox-static:armhf, downloaded once.
 bbdir=$cache/initramfs/busybox
@@ -68,7 +56,8 @@ deb=$(ls "$bbdir"/busybox-static_*_armhf.deb 2>/dev/null | tail -1 || true)
 if [ -z "$deb" ]; then
 	apt_root=$bbdir/apt
 	mkdir -p "$apt_root/lists/partial" "$apt_root/cache/archives/partial" "$apt_root/etc/preferences.d"
-	echo "deb [arch=armhf] $(debian_mirror) bookworm main" >"$apt_root/etc/sources.list"
+	mirror=$(debian_mirror) || die "cannot find the Debian mirror in /etc/apt"
+	echo "deb [arch=armhf] $mirror bookworm main" >"$apt_root/etc/sources.list"
 	: >"$apt_root/status"
 	apt_opts=(
 		-o "Dir::Etc::SourceList=$apt_root/etc/sources.list"

@@ -8,7 +8,6 @@
 #define AMP_PORT_IMPL_H
 
 #include <stdint.h>
-#include <time.h>
 
 #define AMP_PORT_LOAD32(p)     __atomic_load_n((p), __ATOMIC_RELAXED)
 #define AMP_PORT_STORE32(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
@@ -38,14 +37,6 @@ static uint32_t amp_port__tsan_fence __attribute__((unused));
 #define AMP_PORT_RELAX() do { } while (0)
 #endif
 
-#define AMP_PORT_TICKS_PER_US 1u
-
-static inline uint32_t amp_port_ticks(void)
-{
-	struct timespec ts;
-
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint32_t)((uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u);
-}
+#include "../common/amp_port_clock_monotonic.h"
 
 #endif /* AMP_PORT_IMPL_H */
