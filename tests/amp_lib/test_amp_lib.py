@@ -88,6 +88,26 @@ def test_stress_rejects_bad_parameters(build_none: Path) -> None:
     assert proc.returncode == 2 and "bad parameters" in proc.stderr
 
 
+@pytest.mark.parametrize("cc,port,flags", [
+    ("arm-linux-gnueabihf-gcc", "linux", ["-D_POSIX_C_SOURCE=200809L", "-mcpu=cortex-a9"]),
+    ("cc", "linux", ["-D_POSIX_C_SOURCE=200809L"]),
+    ("arm-none-eabi-gcc", "baremetal-armv7", ["-mcpu=cortex-a9", "-ffreestanding",
+                                              "-DAMP_BOARD_TICKS_PER_US=100", "-DAMP_CFG_OCM_CACHED=1"]),
+    ("arm-none-eabi-gcc", "baremetal-armv7", ["-mcpu=cortex-r5", "-mthumb", "-ffreestanding",
+                                              "-DAMP_BOARD_TICKS_PER_US=100"]),
+])
+def test_every_port_compiles_warning_free(cc: str, port: str, flags: list[str], tmp_path: Path) -> None:
+    """Each port builds the sources its side uses with -Werror (the target
+    Linux port for armhf, the bare-metal port with and without caches)."""
+    sources = ["amp_common.c", "amp_linux.c", "amp_strerror.c"] if port == "linux" \
+        else ["amp_common.c", "amp_servo.c"]
+    for src in sources:
+        subprocess.run([cc, "-std=c11", "-Wall", "-Wextra", "-Werror", "-Wpedantic", "-O2", *flags,
+                        f"-I{TOP}/amp_lib/include", f"-I{TOP}/amp_lib/src",
+                        f"-I{TOP}/amp_lib/port/{port}", "-c", str(TOP / "amp_lib" / "src" / src),
+                        "-o", str(tmp_path / (src + ".o"))], check=True, timeout=120)
+
+
 def test_servo_footprint_within_budget(tmp_path: Path) -> None:
     out_json = tmp_path / "footprint.json"
     subprocess.run([sys.executable, str(TOP / "bench" / "amp_footprint.py"),

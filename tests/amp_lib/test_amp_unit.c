@@ -504,6 +504,21 @@ static void test_mailbox(void)
 	CHECK_EQ(amp_linux_mbox_poll(&L, &resp), AMP_OK);
 	CHECK_EQ(resp.status, 3);
 
+	/* NULL and inconsistent arguments from the local caller */
+	CHECK_EQ(amp_linux_mbox_post(NULL, &req), AMP_E_INVAL);
+	CHECK_EQ(amp_linux_mbox_post(&L, NULL), AMP_E_INVAL);
+	CHECK_EQ(amp_linux_mbox_poll(&L, NULL), AMP_E_INVAL);
+	CHECK_EQ(amp_linux_cycle(NULL, NULL, 0, 0, NULL), AMP_E_INVAL);
+	resp.data = NULL;
+	CHECK_EQ(amp_linux_mbox_poll(&L, &resp), AMP_E_INVAL);
+	resp.data = in;
+	CHECK_EQ(amp_linux_mbox_post(&L, &req), AMP_OK);
+	CHECK_EQ(amp_servo_mbox_poll(&S, &sr), 1);
+	CHECK_EQ(amp_servo_mbox_respond(&S, 0, NULL, 4), AMP_E_INVAL);
+	CHECK_EQ(amp_servo_mbox_respond(&S, 0, NULL, 0), AMP_OK);
+	CHECK_EQ(amp_linux_mbox_poll(&L, &resp), AMP_OK);
+	CHECK_EQ(resp.length, 0);
+
 	/* servo absent or faulted: calls fail at once with the reason */
 	amp_servo_set_state(&S, AMP_SSTATE_FAULT, 1);
 	CHECK_EQ(amp_linux_mbox_call(&L, &req, &resp, 1000), AMP_E_PEER_ERROR);
