@@ -48,7 +48,7 @@ fi
 
 echo "[dt] dt-validate $dtb"
 "$venv/dt-validate" -s "$schema" "$dtb" >"$out/validate-$board.log" 2>&1 || true
-ours=$(grep -E '^[^[:space:]].*(servoamp|remoteproc@|ocm-mailbox@|reserved-memory|servo-carveout)' "$out/validate-$board.log" |
+ours=$(grep -E '^[^[:space:]].*(servoamp|remoteproc@|ocm-mailbox@|cycle-interrupt@|reserved-memory|servo-carveout)' "$out/validate-$board.log" |
 	grep -v '^[^:]*: / (servoamp,' || true)
 known=$(grep -cE '^[^[:space:]]' "$out/validate-$board.log" || true)
 if [ -n "$ours" ]; then
@@ -56,6 +56,6 @@ if [ -n "$ours" ]; then
 	echo "[dt] FAIL: dt-validate reports problems in servoamp's nodes (log: $out/validate-$board.log)"
 	exit 1
 fi
-echo "[dt] servoamp nodes (reserved-memory carveout, ocm-mailbox, remoteproc): no findings"
+echo "[dt] servoamp nodes (reserved-memory carveout, ocm-mailbox, cycle-interrupt, remoteproc): no findings"
 echo "[dt] $known finding(s) in upstream/board-level nodes, listed in $out/validate-$board.log:"
 grep -E '^[^[:space:]]' "$out/validate-$board.log" | sed 's/^[^:]*: /  /' | cut -c1-110

@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Build the servoamp initramfs (gzip'ed newc cpio) for the Zynq-7000 guest.
 #
-#   linux/initramfs/build.sh [--module KO] [--firmware FILE]... [--print]
+#   linux/initramfs/build.sh [--module KO] [--firmware FILE]... [--bin FILE]... [--print]
 #
 # Contents: Debian's busybox-static:armhf as the whole userland, /init
 # (init.sh: mounts proc, sys, devtmpfs, debugfs, loads the remoteproc module,
 # runs a shell on the console ttyPS0), the module given with --module in
-# /lib/modules/, and every --firmware file in /lib/firmware/ (same name).
+# /lib/modules/, every --firmware file in /lib/firmware/ (same name), and
+# every --bin file (static armhf programs: servod, ampctl) in /usr/bin/.
 #
 # busybox-static:armhf comes from the machine's own Debian mirror through a
 # PRIVATE apt configuration (own sources list, state and cache directories;
@@ -26,6 +27,7 @@ repo=$(cd "$here/../.." && pwd)
 cache=${SERVOAMP_CACHE:-$HOME/.cache/servoamp}
 module=""
 firmware=()
+bins=()
 print=0
 
 log() { printf '[initramfs] %s\n' "$*" >&2; }
@@ -35,12 +37,14 @@ while [ $# -gt 0 ]; do
 	case $1 in
 	--module) module=$(realpath "$2"); shift 2 ;;
 	--firmware) firmware+=("$(realpath "$2")"); shift 2 ;;
+	--bin) bins+=("$(realpath "$2")"); shift 2 ;;
 	--print) print=1; shift ;;
 	*) die "unknown argument: $1" ;;
 	esac
 done
 [ -z "$module" ] || [ -f "$module" ] || die "module $module not found"
 for f in "${firmware[@]}"; do [ -f "$f" ] || die "firmware $f not found"; done
+for f in "${bins[@]}"; do [ -f "$f" ] || die "program $f not found"; done
 
 gen_init_cpio=$repo/build/kernel/obj/usr/gen_init_cpio
 [ -x "$gen_init_cpio" ] || die "$gen_init_cpio missing: run linux/kernel/build.sh first"
@@ -84,6 +88,7 @@ key=$({
 	sha256sum "$deb" "$here/init.sh" "$0" | cut -d' ' -f1
 	[ -z "$module" ] || printf '%s %s\n' "$(sha256sum <"$module")" "$(basename "$module")"
 	for f in "${firmware[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
+	for f in "${bins[@]}"; do printf 'bin %s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 } | sha256sum | cut -c1-16)
 out=$cache/initramfs/$key
 image=$out/initramfs.cpio.gz
@@ -121,6 +126,9 @@ list=$stage/list
 	[ -z "$module" ] || echo "file /lib/modules/$(basename "$module") $module 644 0 0"
 	for f in "${firmware[@]}"; do
 		echo "file /lib/firmware/$(basename "$f") $f 644 0 0"
+	done
+	for f in "${bins[@]}"; do
+		echo "file /usr/bin/$(basename "$f") $f 755 0 0"
 	done
 } >"$list"
 

@@ -662,6 +662,51 @@ static int zsr_probe(struct platform_device *pdev)
 	return 0;
 }
 
+/**
+ * report_crash_store() - user space reports that the servo core died
+ * @dev: the platform device
+ * @attr: the attribute
+ * @buf: "watchdog" (or "1") for a watchdog expiry, "fatal" for a fatal error
+ * @count: its length
+ *
+ * The servo core has no interrupt towards Linux that could report a hang:
+ * the watchdog over its heartbeat runs in user space (servod, amp_lib's
+ * AMP_E_STALLED). This file hands that verdict to remoteproc, whose
+ * recovery (when enabled, the default) stops the firmware and starts it
+ * again. Only while the state is "running".
+ *
+ * Return: @count, or -EINVAL for another word, -EBUSY when not running.
+ */
+static ssize_t report_crash_store(struct device *dev,
+				  struct device_attribute *attr,
+				  const char *buf, size_t count)
+{
+	struct zynq_servo_rproc *zsr = dev_get_drvdata(dev);
+	enum rproc_crash_type type;
+
+	if (sysfs_streq(buf, "watchdog") || sysfs_streq(buf, "1"))
+		type = RPROC_WATCHDOG;
+	else if (sysfs_streq(buf, "fatal"))
+		type = RPROC_FATAL_ERROR;
+	else
+		return -EINVAL;
+
+	if (zsr->rproc->state != RPROC_RUNNING)
+		return -EBUSY;
+
+	dev_warn(dev, "crash reported by user space (%s)\n",
+		 type == RPROC_WATCHDOG ? "watchdog" : "fatal error");
+	rproc_report_crash(zsr->rproc, type);
+	return count;
+}
+static DEVICE_ATTR_WO(report_crash);
+
+static struct attribute *zsr_attrs[] = {
+	&dev_attr_report_crash.attr,
+	NULL,
+};
+ATTRIBUTE_GROUPS(zsr);
+
 static const struct of_device_id zsr_of_match[] = {
 	{ .compatible = "servoamp,zynq-a9-rproc" },
 	{ /* sentinel */ },
@@ -673,6 +718,7 @@ static struct platform_driver zsr_driver = {
 	.driver = {
 		.name = "zynq-servo-rproc",
 		.of_match_table = zsr_of_match,
+		.dev_groups = zsr_groups,
 	},
 };
 module_platform_driver(zsr_driver);

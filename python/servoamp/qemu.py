@@ -216,10 +216,22 @@ def rpu_app_firmware(board: Board, build: bool = True) -> list[Path]:
     return found
 
 
-def build_initramfs(module: Path, firmware: Sequence[Path]) -> Path:
+def build_userland() -> list[Path]:
+    """servod and ampctl (linux/servod, static armhf), when their sources exist."""
+    mk = REPO / "linux" / "servod" / "Makefile"
+    if not mk.exists():
+        return []
+    out = REPO / "build" / "linux" / "servod"
+    _run(["make", "-s", "-C", mk.parent, f"BUILD={out}"])
+    return [out / "servod", out / "ampctl"]
+
+
+def build_initramfs(module: Path, firmware: Sequence[Path], bins: Sequence[Path] = ()) -> Path:
     cmd: list[str | Path] = [REPO / "linux/initramfs/build.sh", "--print", "--module", module]
     for f in firmware:
         cmd += ["--firmware", f]
+    for b in bins:
+        cmd += ["--bin", b]
     res = subprocess.run([str(c) for c in cmd], text=True, stdout=subprocess.PIPE, check=True)
     return Path(res.stdout.strip().splitlines()[-1])
 
@@ -238,7 +250,7 @@ def prepare_images(
         firmware = build_test_firmware()
         if with_rpu_app:
             firmware = list(firmware) + rpu_app_firmware(board)
-    initramfs = build_initramfs(module, firmware)
+    initramfs = build_initramfs(module, firmware, build_userland())
     stub = build_stub(board)
     dtb = build_dtb(board, kernel_source(kdir), initramfs)
     return Images(
@@ -683,14 +695,15 @@ def run_shell(console: Uart, command: str, prompt: str, timeout: float = 20.0) -
     return int(rc_line[5:-2]), text.rstrip("\n")
 
 
-def interactive(board: Board, images: Images, accel: str | None = None, uart1_log: Path | None = None) -> int:
+def interactive(board: Board, images: Images, accel: str | None = None, uart1_log: Path | None = None,
+                extra_args: Sequence[str] = ()) -> int:
     """Boot with UART0 (and the QEMU monitor: Ctrl-A c) on this terminal and
     UART1 in a log file; return QEMU's exit code."""
     binary = check_qemu(board)
     uart1_log = uart1_log or (REPO / "build" / "qemu" / "uart1.log")
     uart1_log.parent.mkdir(parents=True, exist_ok=True)
     serials = ["mon:stdio", f"file:{uart1_log}"]
-    cmd = [binary] + qemu_args(board, images, serials, accel)
+    cmd = [binary] + qemu_args(board, images, serials, accel) + list(extra_args)
     _log("UART0 (Linux console) on this terminal; Ctrl-A x quits, Ctrl-A c is the monitor")
     _log(f"UART1 (servo core) in {uart1_log}")
     return subprocess.call(cmd)

@@ -200,6 +200,12 @@ def build(dts: Path, bindings: list[Path], board: str):
     put("BOARD_CYCLE_PS_V", ps_v, "prescaler: divide by 2^(PS_V+1) when PS_EN")
     put("BOARD_CYCLE_INTERVAL", interval, "interval register (period - 1 ticks)")
     put("BOARD_CYCLE_NS_PER_TICK_Q16", ns_q16, "counter tick in ns, Q16.16")
+    lidx = prop(servo, "linux-cycle-counter")
+    if not 0 <= lidx <= 2 or lidx == idx:
+        fail(servo, "linux-cycle-counter must be 0..2 and differ from cycle-counter")
+    lirq, _ = gic_id(ttc, lidx)
+    put("BOARD_LINUX_CYCLE_COUNTER", lidx, "Linux's counter (programmed here, cleared by Linux)")
+    put("BOARD_LINUX_CYCLE_IRQ", lirq, "GIC ID of Linux's cycle interrupt (never touched here)")
     prio = prop(servo, "cycle-priority")
     nprio = prop(servo, "nest-test-priority")
     sgi = prop(servo, "nest-test-sgi")

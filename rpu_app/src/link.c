@@ -1,79 +1,386 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * link.c - heartbeat and attach through amp_lib (amp/amp.h).
+ * link.c - the firmware's side of the exchange with Linux, through amp_lib
+ * (amp/amp.h) and the application protocol (servoamp/servo_proto.h).
  *
- * Until Linux has initialised the OCM layout, amp_servo_attach() fails
- * (AMP_E_PEER_ABSENT): the reason is logged once (and again whenever it
- * changes), the cycle and the stop protocol keep running, and the attach
- * is retried every BOARD_ATTACH_RETRY_CYCLES cycles. The heartbeat is
- * counted locally while detached and written to OCM once attached.
+ * Cycle interrupt (link_cycle, seed 000's servo steps; the dispatcher
+ * clears the interrupt flag after the handler):
+ *   1. heartbeat, Linux's state and epoch, watchdog   amp_servo_cycle_rx()
+ *   2. poll the semaphore, at most RX_TIMEOUT_US
+ *   3. read the commands (switch buffer)
+ *   -- fine interpolation, loops and plants            app_cycle()
+ *   4. write the feedback (switch buffer)              amp_servo_cycle_tx()
+ *   5. semaphore back to idle
+ * AMP_E_STALLED (Linux heartbeat still for wd_limit cycles) or
+ * AMP_E_PEER_ABSENT (Linux closed / re-initialised the region): every axis
+ * is brought to a controlled stop and the servo line says SAFESTOP with
+ * the reason; it stays so until SP_CMD_RESUME.
+ *
+ * Background loop (link_poll): attach / re-attach (retried every
+ * BOARD_ATTACH_RETRY_CYCLES cycles), and the parameter service polled from
+ * the mailbox (never blocking, never inside the cycle).
  */
 #include <stdint.h>
-
-#include "arch.h"
-#include "board.h"
-#include "link.h"
-#include "log.h"
 
 #ifndef HAVE_AMP_LIB
 #define HAVE_AMP_LIB 0
 #endif
 
-#if HAVE_AMP_LIB
+#if !HAVE_AMP_LIB
+/* AMP_LIB=0: no transport, no application; a local heartbeat only. */
+#include "link.h"
+#include "log.h"
+
+static volatile uint32_t local_hb;
+volatile struct link_diag link_diag;
+
+void link_init(void)
+{
+	local_hb = 0;
+	log_printf("link: amp_lib servo side not linked; heartbeat kept locally\n");
+}
+
+void link_poll(uint32_t cycle, const struct link_stats *ls)
+{
+	(void)cycle;
+	(void)ls;
+}
+
+void link_cycle(uint32_t t_entry, uint32_t lat_ns)
+{
+	(void)t_entry;
+	(void)lat_ns;
+	local_hb++;
+}
+
+int link_attached(void)
+{
+	return 0;
+}
+
+uint32_t link_heartbeat(void)
+{
+	return local_hb;
+}
+
+const char *link_backend(void)
+{
+	return "local";
+}
+
+#else /* HAVE_AMP_LIB */
+
+#include "board.h"	/* AMP_BOARD_TICKS_PER_US for amp_lib's port: first */
 #include "amp/amp.h"
+#include "app.h"
+#include "arch.h"
+#include "gtimer.h"
+#include "link.h"
+#include "log.h"
+#include "servoamp/servo_proto.h"
+#include "ttc.h"
+
+#define RX_TIMEOUT_US 20u
 
 static struct amp_servo amp;
-#endif
-
 static volatile int attached;
-static volatile uint32_t local_hb;
+static volatile uint32_t local_hb, hang, crash_req, linux_cycle;
 static uint32_t next_try;
 static int last_err;
+static struct amp_fb_axis fb[AMP_MAX_AXES];
+
+/* Costs (global-timer ticks), written by the cycle handler. */
+static struct {
+	uint32_t n;
+	uint32_t rx_max, ctrl_max, tx_max, cyc_max;
+	uint64_t rx_sum, ctrl_sum, tx_sum, cyc_sum;
+	uint32_t lat_max_ns;
+} cost;
+
+/* Diagnostics read by the tests through the QEMU monitor (symbol). */
+volatile struct link_diag link_diag;
 
 void link_init(void)
 {
 	attached = 0;
-	local_hb = 0;
+	local_hb = hang = crash_req = linux_cycle = 0;
 	next_try = 0;
 	last_err = 1;	/* nothing reported yet */
-#if HAVE_AMP_LIB
 	amp = (struct amp_servo){ 0 };
-#else
-	log_printf("link: amp_lib servo side not linked; heartbeat kept locally\n");
-#endif
+	cost = (__typeof__(cost)){ 0 };
+	link_diag = (struct link_diag){ 0 };
+	app_init();
 }
 
-void link_poll(uint32_t cycle)
+static void enter_safestop(uint32_t reason, int write_line)
 {
-#if HAVE_AMP_LIB
+	if (!app_in_safestop()) {
+		app_safestop(reason);
+		link_diag.safestop_cycle = amp.cycle;
+		link_diag.safestop_reason = reason;
+		link_diag.last_linux_beat_cycle = amp.cycle - amp.wd.still;
+	}
+	if (write_line)
+		amp_servo_set_state(&amp, AMP_SSTATE_SAFESTOP, app_fault());
+}
+
+void link_cycle(uint32_t t_entry, uint32_t lat_ns)
+{
+	struct amp_rx_info rx;
+	uint32_t t1, t2, t3, n, was_ss;
 	int rc;
 
-	if (attached || (int32_t)(cycle - next_try) < 0)
+	if (hang)
+		return;	/* debug: stuck in the cycle, no heartbeat, no exchange */
+	local_hb++;
+	if (!attached) {
+		(void)app_cycle(0, 0, fb);	/* plants keep running, axes disabled */
+		return;
+	}
+	was_ss = (uint32_t)app_in_safestop();
+	rc = amp_servo_cycle_rx(&amp, RX_TIMEOUT_US * AMP_BOARD_TICKS_PER_US, &rx);
+	t1 = gtimer_now32();
+	if (rc == AMP_E_STALLED) {
+		enter_safestop(SP_FAULT_LINUX_STALL, 1);
+	} else if (rc == AMP_E_PEER_ABSENT) {
+		/* Linux closed the region (same epoch): say why in the servo
+		 * line; re-initialised (new epoch): the line is Linux's again. */
+		enter_safestop(SP_FAULT_LINUX_GONE,
+			       mmio_read32((uintptr_t)&amp.ocm->hdr.epoch) == amp.epoch);
+		attached = 0;
+		(void)app_cycle(0, 0, fb);
+		return;
+	}
+	if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED)
+		linux_cycle = amp.cmd.cycle;
+	n = app_cycle(&amp.cmd, rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED, fb);
+	if (was_ss && !app_in_safestop())
+		amp_servo_set_state(&amp, AMP_SSTATE_RUNNING, 0);	/* resumed */
+	if (!was_ss && app_in_safestop())
+		amp_servo_set_state(&amp, AMP_SSTATE_SAFESTOP, app_fault());
+	if (app_in_safestop() && !link_diag.standstill_cycle && app_stop_cycles())
+		link_diag.standstill_cycle = link_diag.safestop_cycle + app_stop_cycles() - 1u;
+	t2 = gtimer_now32();
+	(void)amp_servo_cycle_tx(&amp, fb, n, t_entry, lat_ns / (1000u / AMP_BOARD_TICKS_PER_US));
+	t3 = gtimer_now32();
+
+	cost.n++;
+	t3 -= t_entry;
+	t2 -= t1;
+	t1 -= t_entry;
+	cost.rx_sum += t1;
+	cost.ctrl_sum += t2;
+	cost.tx_sum += t3 - t1 - t2;
+	cost.cyc_sum += t3;
+	if (t1 > cost.rx_max)
+		cost.rx_max = t1;
+	if (t2 > cost.ctrl_max)
+		cost.ctrl_max = t2;
+	if (t3 - t1 - t2 > cost.tx_max)
+		cost.tx_max = t3 - t1 - t2;
+	if (t3 > cost.cyc_max)
+		cost.cyc_max = t3;
+	if (lat_ns > cost.lat_max_ns && lat_ns != 0xffffffffu)
+		cost.lat_max_ns = lat_ns;
+}
+
+static uint32_t rd_word(const volatile uint8_t *p, uint32_t i)
+{
+	const volatile uint32_t *w = (const volatile uint32_t *)(const volatile void *)p;
+
+	return w[i];
+}
+
+static uint32_t mean(uint64_t sum, uint32_t n)
+{
+	return n ? (uint32_t)(sum / n) : 0u;
+}
+
+/* Serve one request; returns the status, fills out/len. */
+static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *len,
+		     const struct link_stats *ls)
+{
+	uint32_t nw = req->length / 4u;
+
+	*len = 0;
+	if (req->length % 4u)
+		return SP_E_LENGTH;
+	switch (req->command) {
+	case SP_CMD_PARAM_GET: {
+		uint32_t id;
+
+		if (nw != 1u)
+			return SP_E_LENGTH;
+		id = rd_word(req->payload, 0);
+		if (id >= SP_P_COUNT)
+			return SP_E_ID;
+		out[0] = id;
+		out[1] = app_param(id);
+		*len = 8;
+		return SP_OK;
+	}
+	case SP_CMD_PARAM_SET: {
+		uint32_t id, v;
+		int32_t rc;
+
+		if (nw != 2u)
+			return SP_E_LENGTH;
+		id = rd_word(req->payload, 0);
+		v = rd_word(req->payload, 1);
+		rc = app_param_check(id, v);
+		if (rc != SP_OK)
+			return rc;
+		app_param_apply(id, v);
+		if (id == SP_P_wd_limit)
+			amp.wd.limit = v;
+		out[0] = id;
+		out[1] = app_param(id);
+		*len = 8;
+		return SP_OK;
+	}
+	case SP_CMD_PARAM_SET_MANY: {
+		uint32_t cnt;
+
+		if (nw < 1u)
+			return SP_E_LENGTH;
+		cnt = rd_word(req->payload, 0);
+		if (cnt > SP_SET_MANY_MAX || nw != 1u + 2u * cnt)
+			return SP_E_LENGTH;
+		for (uint32_t i = 0; i < cnt; i++) {
+			int32_t rc = app_param_check(rd_word(req->payload, 1u + 2u * i),
+						     rd_word(req->payload, 2u + 2u * i));
+			if (rc != SP_OK)
+				return rc;
+		}
+		for (uint32_t i = 0; i < cnt; i++) {
+			uint32_t id = rd_word(req->payload, 1u + 2u * i);
+			uint32_t v = rd_word(req->payload, 2u + 2u * i);
+
+			app_param_apply(id, v);
+			if (id == SP_P_wd_limit)
+				amp.wd.limit = v;
+		}
+		out[0] = cnt;
+		*len = 4;
+		return SP_OK;
+	}
+	case SP_CMD_STATUS: {
+		struct sp_status s = { 0 };
+		uint32_t flags;
+
+		if (nw)
+			return SP_E_LENGTH;
+		s.version = SP_VERSION;
+		s.state = mmio_read32((uintptr_t)&amp.ocm->servo_line.state);
+		s.fault = app_fault();
+		s.cycles = ls->cycles;
+		s.missed = ls->missed;
+		s.overruns = ls->overruns;
+		flags = irq_save();
+		s.rx_fresh = amp.st.fresh;
+		s.rx_stale = amp.st.stale;
+		s.rx_torn = amp.st.torn;
+		s.rx_missed = amp.st.missed;
+		s.rx_invalid = amp.st.invalid;
+		s.samples = cost.n;
+		s.rx_ticks_max = cost.rx_max;
+		s.rx_ticks_mean = mean(cost.rx_sum, cost.n);
+		s.ctrl_ticks_max = cost.ctrl_max;
+		s.ctrl_ticks_mean = mean(cost.ctrl_sum, cost.n);
+		s.tx_ticks_max = cost.tx_max;
+		s.tx_ticks_mean = mean(cost.tx_sum, cost.n);
+		s.cycle_ticks_max = cost.cyc_max;
+		s.cycle_ticks_mean = mean(cost.cyc_sum, cost.n);
+		s.irq_lat_max_ns = cost.lat_max_ns;
+		s.linux_cycle = linux_cycle;
+		s.hb_linux_cycles = amp.wd.still;
+		irq_restore(flags);
+		s.attach_count = mmio_read32((uintptr_t)&amp.ocm->servo_line.attach_count);
+		s.period_us = app_param(SP_P_cycle_period_us);
+		s.axes = app_param(SP_P_axes);
+		s.safestops = app_safestops();
+		s.stop_cycles = app_stop_cycles();
+		s.mbox_served = amp.st.mbox_ok;
+		for (uint32_t i = 0; i < sizeof(s) / 4u; i++)
+			out[i] = ((uint32_t *)&s)[i];
+		*len = sizeof(s);
+		return SP_OK;
+	}
+	case SP_CMD_RESUME:
+		if (nw)
+			return SP_E_LENGTH;
+		if (!app_in_safestop())
+			return SP_E_STATE;
+		app_resume();
+		return SP_OK;
+	case SP_CMD_DEBUG: {
+		uint32_t what;
+
+		if (nw != 1u)
+			return SP_E_LENGTH;
+		what = rd_word(req->payload, 0);
+		if (what == SP_DEBUG_HANG) {
+			log_printf("debug: hang requested: cycle work and heartbeat stop, STOP still honoured\n");
+			hang = 1;
+		} else if (what == SP_DEBUG_CRASH) {
+			log_printf("debug: crash requested: undefined instruction in the background loop\n");
+			crash_req = 1;
+		} else {
+			return SP_E_RANGE;
+		}
+		return SP_OK;
+	}
+	default:
+		return SP_E_CMD;
+	}
+}
+
+void link_poll(uint32_t cycle, const struct link_stats *ls)
+{
+	struct amp_mbox_req req;
+	uint32_t out[(sizeof(struct sp_status) + 3u) / 4u + 2u];
+	uint32_t len;
+	int rc;
+
+	if (crash_req) {
+		crash_req = 0;
+		__asm__ volatile(".inst 0xe7f000f0" ::: "memory");	/* udf #0 */
+	}
+	if (hang)
+		return;
+	if (attached) {
+		rc = amp_servo_mbox_poll(&amp, &req);
+		if (rc == 1) {
+			int32_t st = serve(&req, out, &len, ls);
+
+			(void)amp_servo_mbox_respond(&amp, st, out, len);
+		}
+		return;
+	}
+	if ((int32_t)(cycle - next_try) < 0)
 		return;
 	next_try = cycle + BOARD_ATTACH_RETRY_CYCLES;
 	rc = amp_servo_attach(&amp, (void *)(uintptr_t)BOARD_AMP_BASE, BOARD_AMP_SIZE);
 	if (rc == AMP_OK) {
+		uint32_t wd = app_param(SP_P_wd_limit);
+
+		/* Linux's header gives the watchdog limit until servod loads
+		 * the parameter set. */
+		if (wd != amp.wd.limit)
+			app_param_apply(SP_P_wd_limit, amp.wd.limit);
+		if (app_in_safestop())
+			amp_servo_set_state(&amp, AMP_SSTATE_SAFESTOP, app_fault());
 		compiler_barrier();
 		attached = 1;
-		log_printf("link: attached to amp_lib region %p epoch %u (cycle %u)\n",
-			   (void *)(uintptr_t)BOARD_AMP_BASE, (unsigned)amp.epoch, (unsigned)cycle);
+		log_printf("link: attached to amp_lib region %p epoch %u attach_count %u (cycle %u)\n",
+			   (void *)(uintptr_t)BOARD_AMP_BASE, (unsigned)amp.epoch,
+			   (unsigned)mmio_read32((uintptr_t)&amp.ocm->servo_line.attach_count),
+			   (unsigned)cycle);
 	} else if (rc != last_err) {
 		log_printf("link: amp_servo_attach: %s (%d); retry every %u cycles\n",
 			   amp_strerror(rc), rc, (unsigned)BOARD_ATTACH_RETRY_CYCLES);
 	}
 	last_err = rc;
-#else
-	(void)cycle;
-#endif
-}
-
-void link_cycle(void)
-{
-	local_hb++;
-#if HAVE_AMP_LIB
-	if (attached)
-		amp_servo_heartbeat(&amp);
-#endif
 }
 
 int link_attached(void)
@@ -88,5 +395,7 @@ uint32_t link_heartbeat(void)
 
 const char *link_backend(void)
 {
-	return HAVE_AMP_LIB ? "amp_lib" : "local";
+	return "amp_lib";
 }
+
+#endif /* HAVE_AMP_LIB */

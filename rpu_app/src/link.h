@@ -5,16 +5,27 @@
 #include <stdint.h>
 
 /*
- * The firmware's only interface to the OCM transport (amp_lib). Built
- * with amp_lib's servo side when HAVE_AMP_LIB=1 (the Makefile's default
- * when amp_lib/src/amp_servo.c exists), else with a local heartbeat
- * counter that never touches OCM.
+ * The firmware's only interface to the OCM transport (amp_lib) and to the
+ * application protocol (servoamp/servo_proto.h); link.c.
  */
+struct link_stats {		/* cycle timing kept by main.c */
+	uint32_t cycles, missed, overruns;
+};
+
+/* Diagnostics for the tests (read through the QEMU monitor by symbol). */
+struct link_diag {
+	uint32_t safestop_cycle;	/* amp cycle at which the safe stop began */
+	uint32_t safestop_reason;
+	uint32_t last_linux_beat_cycle;	/* amp cycle of Linux's last heartbeat before it */
+	uint32_t standstill_cycle;	/* amp cycle at which every axis stood still */
+};
+extern volatile struct link_diag link_diag;
+
 void link_init(void);
-/* Main loop: attach / retry every BOARD_ATTACH_RETRY_CYCLES cycles. */
-void link_poll(uint32_t cycle);
-/* Cycle interrupt: heartbeat (once per cycle). */
-void link_cycle(void);
+/* Main loop: attach / retry, mailbox service. */
+void link_poll(uint32_t cycle, const struct link_stats *ls);
+/* Cycle interrupt: the exchange (t_entry: global timer at handler entry). */
+void link_cycle(uint32_t t_entry, uint32_t lat_ns);
 int link_attached(void);
 uint32_t link_heartbeat(void);
 const char *link_backend(void);

@@ -40,6 +40,7 @@ extern char __image_end[];
 /* Cycle state: written by the cycle handler, read by the main loop. */
 static volatile uint32_t cycles;
 static uint32_t last_gt;
+static volatile uint32_t period_changed, last_period_ns;
 static uint32_t period_min, period_max, overruns, missed;
 static volatile uint32_t sgi_stamp, sgi_seen;
 static uint32_t nest_ok, nest_fail;
@@ -60,26 +61,35 @@ static uint32_t nest_test_latency(void *arg)
 static void cycle_handler(void *arg)
 {
 	uint32_t now = gtimer_now32();
+	uint32_t lat = ttc_cycle_since_fire_ns(0);
 	uint32_t c = cycles;
+	uint32_t pns = ttc_period_ns();
+
+	/* The interval event's own time (handler entry minus the latency
+	 * read from the counter, which restarted at the event): periods and
+	 * missed events are counted between events, not between entries, so
+	 * entry jitter is never taken for a lost event. */
+	uint32_t fire = now - lat / NS_PER_GT_TICK;
 
 	(void)arg;
-	if (c) {
-		uint32_t d = (now - last_gt) * NS_PER_GT_TICK;
+	if (c && !period_changed) {
+		uint32_t d = (fire - last_gt) * NS_PER_GT_TICK;
 
 		if (d < period_min)
 			period_min = d;
 		if (d > period_max)
 			period_max = d;
-		if (d > BOARD_CYCLE_PERIOD_NS + BOARD_CYCLE_PERIOD_NS / 2u) {
+		if (d > pns + pns / 2u) {
 			/* Late by more than half a period: interval events
 			 * merged (the TTC flag is a level, cleared once). */
 			overruns++;
-			missed += (d + BOARD_CYCLE_PERIOD_NS / 2u) / BOARD_CYCLE_PERIOD_NS - 1u;
+			missed += (d + pns / 2u) / pns - 1u;
 		}
 	}
-	last_gt = now;
+	period_changed = 0;
+	last_gt = fire;
 	cycles = c + 1u;
-	link_cycle();
+	link_cycle(now, lat);
 
 	/* Nesting self-test, once per statistics interval: a higher-priority
 	 * SGI to this core must preempt this handler before it returns. */
@@ -174,6 +184,7 @@ __attribute__((noreturn)) void servo_main(void)
 	last_gt = 0;
 	period_min = UINT32_MAX;
 	period_max = overruns = missed = 0;
+	period_changed = 0;
 	sgi_stamp = sgi_seen = 0;
 	nest_ok = nest_fail = 0;
 
@@ -223,7 +234,9 @@ __attribute__((noreturn)) void servo_main(void)
 
 	link_init();
 	gt_start = gtimer_now();
-	ttc_cycle_start();
+	if (ttc_cycle_start(BOARD_CYCLE_PERIOD_US))
+		log_printf("error: cycle period %u us not reachable\n", (unsigned)BOARD_CYCLE_PERIOD_US);
+	last_period_ns = ttc_period_ns();
 	irq_enable(BOARD_NEST_TEST_SGI);
 	irq_enable(BOARD_CYCLE_IRQ);
 	cpu_irq_enable();
@@ -249,7 +262,20 @@ __attribute__((noreturn)) void servo_main(void)
 			servo_quiesce_and_park();
 		log_poll();
 		c = cycles;
-		link_poll(c);
+		{
+			uint32_t flags = irq_save();
+			struct link_stats ls = { cycles, missed, overruns };
+
+			irq_restore(flags);
+			link_poll(c, &ls);
+			if (ttc_period_ns() != last_period_ns) {
+				/* cycle_period_us changed: the next gap is not a period */
+				last_period_ns = ttc_period_ns();
+				period_changed = 1;
+				period_min = UINT32_MAX;
+				period_max = 0;
+			}
+		}
 		if (c - last_stats >= BOARD_STATS_CYCLES) {
 			last_stats = c;
 			print_stats();

@@ -1,10 +1,24 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * ttc.c - cycle interrupt source: counter BOARD_CYCLE_COUNTER of the TTC
- * named by the devicetree, in interval mode, prescaler and interval
- * computed by the generator (16-bit counter). The counter restarts from 0
- * at every interval event, so its value read in the handler is exactly the
- * time elapsed since the interrupt was raised: that is the entry latency.
+ * ttc.c - the cycle time base: two counters of the TTC named by the
+ * devicetree, programmed here with the same interval (the firmware owns
+ * the TTC's configuration):
+ *
+ *   counter BOARD_CYCLE_COUNTER        -> this core's cycle interrupt
+ *                                         (cleared here, ttc_cycle_clear)
+ *   counter BOARD_LINUX_CYCLE_COUNTER  -> Linux's cycle interrupt (CPU0;
+ *                                         Linux clears it through UIO)
+ *
+ * Linux's counter is started first and this core's counter half a period
+ * later: both cores get exactly one interrupt per cycle from a common time
+ * base, Linux leading by T/2, so that Linux's commands of cycle n are
+ * published before the servo reads them and the servo's feedback of cycle
+ * n-1 is complete before Linux reads it (docs/cycle.md).
+ *
+ * Interval mode, 16-bit counter, prescaler chosen at run time for the
+ * period (the cycle_period_us parameter). The counter restarts from 0 at
+ * every interval event, so its value read in the handler is the time
+ * elapsed since the interrupt was raised: the entry latency.
  *
  * Interrupt: level, held while (ISR & IER) != 0; the ISR is clear-on-read
  * (as QEMU's hw/timer/cadence_ttc.c and the Zynq TRM describe it).
@@ -28,25 +42,75 @@
 #define INT_INTERVAL    (1u << 0)
 
 #define N BOARD_CYCLE_COUNTER
+#define L BOARD_LINUX_CYCLE_COUNTER
 #define REG(off) (BOARD_TTC_BASE + (off))
 
-void ttc_cycle_start(void)
+/* Set by ttc_cycle_start (no initialised data in this firmware). */
+static uint32_t ns_per_tick_q16;
+static uint32_t period_ns;
+
+int ttc_setting(uint32_t period_us, struct ttc_setting *s)
 {
-	mmio_write32(REG(TTC_CNT_CTRL(N)), CNT_DIS | CNT_WAVE_DIS);
-	mmio_write32(REG(TTC_IER(N)), 0);
-	(void)mmio_read32(REG(TTC_ISR(N)));
-	mmio_write32(REG(TTC_CLK_CTRL(N)),
-		     (BOARD_CYCLE_PS_EN ? CLK_PS_EN : 0u) | (BOARD_CYCLE_PS_V << 1));
-	mmio_write32(REG(TTC_INTERVAL(N)), BOARD_CYCLE_INTERVAL);
-	mmio_write32(REG(TTC_IER(N)), INT_INTERVAL);
+	for (int ps = -1; ps < 16; ps++) {
+		uint64_t div = ps < 0 ? 1u : 2ull << ps;
+		uint64_t ticks = ((uint64_t)BOARD_TTC_HZ * period_us + div * 500000u) / (div * 1000000u);
+
+		if (ticks >= 2u && ticks <= 0x10000u) {
+			s->clk = ps < 0 ? 0u : (CLK_PS_EN | ((uint32_t)ps << 1));
+			s->interval = (uint32_t)ticks - 1u;
+			s->ns_per_tick_q16 = (uint32_t)((div * 1000000000ull * 65536u + BOARD_TTC_HZ / 2u) / BOARD_TTC_HZ);
+			s->period_ns = (uint32_t)(ticks * div * 1000000000ull / BOARD_TTC_HZ);
+			return 0;
+		}
+	}
+	return -1;
+}
+
+static void counter_off(uint32_t n)
+{
+	mmio_write32(REG(TTC_CNT_CTRL(n)), CNT_DIS | CNT_WAVE_DIS);
+	mmio_write32(REG(TTC_IER(n)), 0);
+	(void)mmio_read32(REG(TTC_ISR(n)));
+}
+
+int ttc_cycle_start(uint32_t period_us)
+{
+	struct ttc_setting s;
+	uint32_t flags;
+
+	if (ttc_setting(period_us, &s))
+		return -1;
+	flags = irq_save();
+	counter_off(N);
+	counter_off(L);
+	ns_per_tick_q16 = s.ns_per_tick_q16;
+	period_ns = s.period_ns;
+	for (uint32_t n = 0; n < 2u; n++) {
+		uint32_t c = n ? N : L;
+
+		mmio_write32(REG(TTC_CLK_CTRL(c)), s.clk);
+		mmio_write32(REG(TTC_INTERVAL(c)), s.interval);
+		mmio_write32(REG(TTC_IER(c)), INT_INTERVAL);
+	}
+	/* Linux's counter first; this core's half a period later. */
+	mmio_write32(REG(TTC_CNT_CTRL(L)), CNT_INTERVAL | CNT_RST | CNT_WAVE_DIS);
+	for (uint32_t i = 0; i < 10000000u; i++)
+		if ((mmio_read32(REG(TTC_CNT_VAL(L))) & 0xffffu) >= s.interval / 2u)
+			break;
 	mmio_write32(REG(TTC_CNT_CTRL(N)), CNT_INTERVAL | CNT_RST | CNT_WAVE_DIS);
+	irq_restore(flags);
+	return 0;
 }
 
 void ttc_cycle_stop(void)
 {
-	mmio_write32(REG(TTC_CNT_CTRL(N)), CNT_DIS | CNT_WAVE_DIS);
-	mmio_write32(REG(TTC_IER(N)), 0);
-	(void)mmio_read32(REG(TTC_ISR(N)));
+	counter_off(N);
+	counter_off(L);
+}
+
+uint32_t ttc_period_ns(void)
+{
+	return period_ns ? period_ns : BOARD_CYCLE_PERIOD_NS;
 }
 
 void ttc_cycle_clear(void *arg)
@@ -60,5 +124,5 @@ uint32_t ttc_cycle_since_fire_ns(void *arg)
 	uint32_t ticks = mmio_read32(REG(TTC_CNT_VAL(N))) & 0xffffu;
 
 	(void)arg;
-	return (uint32_t)(((uint64_t)ticks * BOARD_CYCLE_NS_PER_TICK_Q16) >> 16);
+	return (uint32_t)(((uint64_t)ticks * (ns_per_tick_q16 ? ns_per_tick_q16 : BOARD_CYCLE_NS_PER_TICK_Q16)) >> 16);
 }

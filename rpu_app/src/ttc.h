@@ -4,10 +4,21 @@
 
 #include <stdint.h>
 
-/* The cycle timer: one counter of a Cadence TTC in interval mode. */
-void ttc_cycle_start(void);
+/* The cycle time base: two counters of a Cadence TTC in interval mode,
+ * one interrupt per core (this core's, and Linux's half a period ahead). */
+struct ttc_setting {
+	uint32_t clk;		/* clock control register value */
+	uint32_t interval;	/* interval register (ticks - 1) */
+	uint32_t ns_per_tick_q16;
+	uint32_t period_ns;	/* what the counter really produces */
+};
+/* 0 and *s for a period in microseconds, -1 if the 16-bit counter cannot. */
+int ttc_setting(uint32_t period_us, struct ttc_setting *s);
+/* (Re)program and start both counters; -1 if the period is unreachable. */
+int ttc_cycle_start(uint32_t period_us);
 void ttc_cycle_stop(void);
-/* IDT clear function: reads (clears) the counter's interrupt register. */
+uint32_t ttc_period_ns(void);
+/* IDT clear function: reads (clears) this core's counter interrupt register. */
 void ttc_cycle_clear(void *arg);
 /* Nanoseconds since the last interval event (the "expected fire point"). */
 uint32_t ttc_cycle_since_fire_ns(void *arg);

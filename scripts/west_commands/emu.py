@@ -37,6 +37,9 @@ DESCRIPTION = "build what is missing and boot the emulated board (QEMU)"
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("-b", "--board", default="zynq7000_qemu", help="board folder under boards/ (default: %(default)s)")
     parser.add_argument("--accel", default=None, help="QEMU -accel value, e.g. 'tcg,thread=single' (default: QEMU's, multi-threaded TCG)")
+    parser.add_argument("--icount", default=None, metavar="SPEC",
+                        help="QEMU -icount value, e.g. 'shift=0,sleep=off' (deterministic guest time: one "
+                             "instruction = 2^shift ns; no cycle is lost to host scheduling; see docs/cycle.md)")
     parser.add_argument("--firmware", action="append", type=Path, default=None, metavar="ELF",
                         help="ELF to put in /lib/firmware (repeatable; default: test fixtures + rpu_app)")
     parser.add_argument("--no-rpu-app", action="store_true", help="do not build or include rpu_app")
@@ -64,12 +67,14 @@ def run(args: argparse.Namespace) -> int:
     if args.script:
         commands += [ln for ln in args.script.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not commands:
-        return qemu.interactive(board, images, accel=args.accel)
+        return qemu.interactive(board, images, accel=args.accel,
+                                extra_args=["-icount", args.icount] if args.icount else [])
     return scripted(board, images, commands, args)
 
 
 def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: argparse.Namespace) -> int:
-    machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs)
+    extra = ["-icount", args.icount] if args.icount else []
+    machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs, extra_args=extra)
     failed = 0
     with machine:
         times = qemu.boot_to_shell(machine, timeout=args.timeout)

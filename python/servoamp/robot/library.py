@@ -70,6 +70,12 @@ class EmulatedBoard:
         logger.info(f"images ready in {time.monotonic() - t0:.1f} s: {self._images}")
 
     @keyword
+    def set_emulation_accel(self, accel: str = "") -> None:
+        """QEMU ``-accel`` value for the next Start Emulation, e.g.
+        ``tcg,thread=single`` (empty: QEMU's default, multi-threaded TCG)."""
+        self._accel = accel or None
+
+    @keyword
     def start_emulation(self) -> None:
         """Start QEMU (builds the images first if needed)."""
         if self._images is None:

@@ -1,0 +1,164 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * servo_proto.h - THE application protocol between servod (Linux, CPU0)
+ * and the servo firmware rpu_app (CPU1), on top of amp_lib:
+ *
+ *  - mailbox (non-periodic) command codes, payloads and error statuses of
+ *    the parameter service, the status query and the debug commands;
+ *  - the parameter table: id, name, type, unit, range, default, flags;
+ *  - the meaning of the periodic records' words (command flags, axis
+ *    status bits) and of the servo line's fault codes.
+ *
+ * Included by rpu_app/src/app.c and linux/servod/ (servod, ampctl); documented in
+ * docs/cycle.md. Freestanding C11: no libc needed (the firmware has none).
+ * All payload words are little-endian 32-bit; floats are IEEE-754 binary32
+ * carried bit for bit in a 32-bit word.
+ */
+#ifndef SERVOAMP_SERVO_PROTO_H
+#define SERVOAMP_SERVO_PROTO_H
+
+#include <stdint.h>
+
+#include "amp/amp_config.h"	/* AMP_MAX_AXES */
+
+#define SP_VERSION 1u
+
+/* ---- mailbox commands (struct amp_msg.command) -------------------------
+ * Request / response payloads are arrays of 32-bit words.              */
+enum sp_command {
+	/* req {id}                      resp {id, value}                     */
+	SP_CMD_PARAM_GET = 0x0101u,
+	/* req {id, value}               resp {id, value as applied}          */
+	SP_CMD_PARAM_SET = 0x0102u,
+	/* req {n, (id, value) x n}      resp {n}; all checked before any is
+	 * applied: one bad entry rejects the whole request (no change)     */
+	SP_CMD_PARAM_SET_MANY = 0x0103u,
+	/* req {}                        resp struct sp_status                */
+	SP_CMD_STATUS = 0x0201u,
+	/* req {}  leave SAFESTOP (Linux is back): axes follow commands again */
+	SP_CMD_RESUME = 0x0202u,
+	/* req {what}  debug: SP_DEBUG_*; resp {} (sent before it takes effect) */
+	SP_CMD_DEBUG = 0x0f01u,
+};
+
+/* Debug commands (tests): make the firmware fail on purpose. */
+enum sp_debug {
+	/* The cycle handler still acknowledges its interrupt but does no
+	 * exchange and no heartbeat (a servo loop stuck in its cycle). The
+	 * background loop still polls the STOP word, so remoteproc can stop
+	 * it even in QEMU (whose SLCR cannot reset CPU1). */
+	SP_DEBUG_HANG = 1u,
+	/* Undefined instruction in the background loop: the fault handler
+	 * logs, writes 'CRSH' and waits for STOP. */
+	SP_DEBUG_CRASH = 2u,
+};
+
+/* Application error statuses (struct amp_msg.status), beside amp_lib's
+ * AMP_E_* (-1..-9) which the transport itself may return. */
+enum sp_error {
+	SP_OK = 0,
+	SP_E_CMD = -100,	/* unknown command */
+	SP_E_LENGTH = -101,	/* payload length wrong for the command */
+	SP_E_ID = -102,		/* unknown parameter id */
+	SP_E_RANGE = -103,	/* value outside [min, max] (or NaN) */
+	SP_E_READONLY = -104,	/* parameter cannot be written */
+	SP_E_STATE = -105,	/* not possible in the current state */
+};
+
+/* ---- parameters ---------------------------------------------------------- */
+enum sp_type { SP_T_U32 = 0, SP_T_I32 = 1, SP_T_F32 = 2 };
+
+#define SP_F_RO      (1u << 0)	/* read-only */
+#define SP_F_RESTORE (1u << 1)	/* servod keeps it in its file and loads it at every attach */
+
+/* The one parameter table: X(id, name, type, unit, min, max, default, flags).
+ * min/max/default are written as numbers of the parameter's type. */
+#define SP_PARAMS(X) \
+	X(0,  axes,            SP_T_U32, "",          1,      AMP_MAX_AXES, 4,      SP_F_RESTORE) \
+	X(1,  cycle_period_us, SP_T_U32, "us",        125,    10000,   1000,   SP_F_RESTORE) \
+	X(2,  wd_limit,        SP_T_U32, "cycles",    2,      1000,    10,     SP_F_RESTORE) \
+	X(3,  pos_kp,          SP_T_F32, "1/s",       0,      2000,    60,     SP_F_RESTORE) \
+	X(4,  vel_kp,          SP_T_F32, "A.s/rad",   0,      100,     0.5,    SP_F_RESTORE) \
+	X(5,  vel_ki,          SP_T_F32, "A/rad",     0,      100000,  20,     SP_F_RESTORE) \
+	X(6,  vel_max,         SP_T_F32, "rad/s",     0.1,    2000,    300,    SP_F_RESTORE) \
+	X(7,  cur_max,         SP_T_F32, "A",         0.1,    100,     10,     SP_F_RESTORE) \
+	X(8,  kt,              SP_T_F32, "N.m/A",     0.001,  10,      0.1,    SP_F_RESTORE) \
+	X(9,  inertia,         SP_T_F32, "kg.m2",     1e-6,   1,       1e-4,   SP_F_RESTORE) \
+	X(10, friction,        SP_T_F32, "N.m.s/rad", 0,      1,       1e-4,   SP_F_RESTORE) \
+	X(11, counts_per_rev,  SP_T_U32, "inc",       100,    1000000, 10000,  SP_F_RESTORE) \
+	X(12, decel_max,       SP_T_F32, "rad/s2",    1,      1000000, 2000,   SP_F_RESTORE) \
+	X(13, fe_max,          SP_T_I32, "inc",       1,      100000000, 100000, SP_F_RESTORE) \
+	X(14, fine_steps,      SP_T_U32, "",          4,      4,       4,      SP_F_RO)
+
+enum sp_param_id {
+#define SP_X_ENUM(id, name, type, unit, min, max, def, flags) SP_P_##name = id,
+	SP_PARAMS(SP_X_ENUM)
+#undef SP_X_ENUM
+	SP_P_COUNT
+};
+
+struct sp_param_desc {
+	uint32_t id;
+	const char *name;
+	uint32_t type;		/* enum sp_type */
+	const char *unit;
+	double min, max, def;	/* in the parameter's type (exact for u32/i32) */
+	uint32_t flags;
+};
+
+/* Only for code that can use double constants (both sides can: the
+ * firmware converts them with libgcc's soft-float helpers at init). */
+#define SP_X_DESC(id, name, type, unit, min, max, def, flags) \
+	{ id, #name, type, unit, (double)(min), (double)(max), (double)(def), flags },
+#define SP_PARAM_TABLE_INIT { SP_PARAMS(SP_X_DESC) }
+
+/* Largest request: SET_MANY with every parameter. */
+#define SP_SET_MANY_MAX SP_P_COUNT
+
+/* ---- SP_CMD_STATUS response ------------------------------------------------ */
+struct sp_status {
+	uint32_t version;	/* SP_VERSION */
+	uint32_t state;		/* servo line state (AMP_SSTATE_*) */
+	uint32_t fault;		/* SP_FAULT_* or AMP_E_* */
+	uint32_t cycles;	/* cycle interrupts handled since start */
+	uint32_t missed;	/* interval events lost (timer gaps > 1.5 periods) */
+	uint32_t overruns;	/* periods longer than 1.5 x nominal */
+	uint32_t rx_fresh, rx_stale, rx_torn, rx_missed, rx_invalid;
+	uint32_t attach_count;
+	uint32_t period_us;
+	uint32_t axes;
+	uint32_t safestops;	/* entries into SAFESTOP since start */
+	uint32_t stop_cycles;	/* cycles from the watchdog to standstill (last safe stop) */
+	uint32_t irq_lat_max_ns;	/* cycle interrupt entry latency, max */
+	/* Costs in A9 global-timer ticks (10 ns), measured in the cycle handler:
+	 * rx = handler entry -> commands consumed (amp_servo_cycle_rx done),
+	 * ctrl = interpolation + loops + plant models, tx = feedback published,
+	 * cycle = whole handler work; means over `samples` cycles. */
+	uint32_t samples;
+	uint32_t rx_ticks_max, rx_ticks_mean;
+	uint32_t ctrl_ticks_max, ctrl_ticks_mean;
+	uint32_t tx_ticks_max, tx_ticks_mean;
+	uint32_t cycle_ticks_max, cycle_ticks_mean;
+	uint32_t mbox_served;
+	uint32_t linux_cycle;	/* Linux cycle number in the last commands consumed */
+	uint32_t hb_linux_cycles;	/* cycles since Linux's heartbeat last moved */
+};
+
+/* ---- periodic records ----------------------------------------------------- */
+/* amp_cmd_record.flags */
+#define SP_CMDF_MOTION (1u << 0)	/* targets are valid (servod is running motion) */
+
+/* amp_fb_axis.status_word bits */
+#define SP_AX_ENABLED    (1u << 0)
+#define SP_AX_SAFESTOP   (1u << 1)	/* axis ramped down / held because of a safe stop */
+#define SP_AX_STANDSTILL (1u << 2)	/* |velocity| below 1 inc per cycle */
+#define SP_AX_CUR_LIMIT  (1u << 3)	/* current limited in this cycle */
+#define SP_AX_FE_LIMIT   (1u << 4)	/* following error over fe_max */
+
+/* servo line fault word while SAFESTOP (amp_servo_set_state) */
+#define SP_FAULT_NONE        0u
+#define SP_FAULT_LINUX_STALL 0x57440001u	/* "WD" + 1: Linux heartbeat still for wd_limit cycles */
+#define SP_FAULT_LINUX_GONE  0x57440002u	/* Linux closed / re-initialised the region */
+#define SP_FAULT_FOLLOWING   0x57440003u	/* following error over fe_max */
+
+#endif /* SERVOAMP_SERVO_PROTO_H */
