@@ -8,4 +8,4 @@ set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"
 scripts/bootstrap.sh
-exec .venv/bin/python scripts/west_commands/emu.py --script scripts/demo/guest-commands.sh "$@"
+exec .venv/bin/python scripts/west_commands/emu.py --accel tcg,thread=single --script scripts/demo/guest-commands.sh "$@"

@@ -3,13 +3,31 @@
 uname -a
 cat /sys/class/remoteproc/remoteproc0/name /sys/class/remoteproc/remoteproc0/state
 ls -l /lib/firmware
+# 1. servod: the cycle daemon (SCHED_FIFO thread on the cycle interrupt, through UIO)
+(servod > /tmp/servod.log 2>&1 &)
+while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done
+# 2. load and start the servo firmware through the remoteproc sysfs
 echo rpu_app.elf > /sys/class/remoteproc/remoteproc0/firmware
 echo start > /sys/class/remoteproc/remoteproc0/state
 cat /sys/class/remoteproc/remoteproc0/state
-sleep 1
-cat /sys/kernel/debug/remoteproc/remoteproc0/trace0
-sleep 1
-tail -n 3 /sys/kernel/debug/remoteproc/remoteproc0/trace0
+while ! grep -q 'parameter set loaded' /tmp/servod.log; do sleep 0.05; done
+head -n 8 /sys/kernel/debug/remoteproc/remoteproc0/trace0
+# 3. the cycle runs: both sides' counts, parameters
+sleep 2
+ampctl status
+ampctl stats
+ampctl param list
+ampctl param set pos_kp 80
+ampctl param get pos_kp
+# 4. fault and recovery: hang the firmware; servod detects it, remoteproc restarts it, parameters come back
+ampctl debug hang
+sleep 2
+tail -n 6 /tmp/servod.log
+ampctl status
+ampctl param get pos_kp
+# 5. stop the firmware; servod waits for it
 echo stop > /sys/class/remoteproc/remoteproc0/state
 cat /sys/class/remoteproc/remoteproc0/state
-dmesg | grep -i -E 'remoteproc|zynq-servo' | tail -n 8
+sleep 0.5
+tail -n 3 /tmp/servod.log
+ampctl param get pos_kp; echo "ampctl exit status $? (3 = servo not running)"
