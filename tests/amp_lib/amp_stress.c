@@ -420,6 +420,7 @@ static int run_watchdog(void)
 	pid_t lp, sp;
 	struct timespec next;
 	uint32_t t = 0, phase_end, ok = 1;
+	int wstatus, servo_reaped = 0;
 
 	if (amp_linux_init(&l, ocm, AMP_OCM_SIZE, wd_limit) != AMP_OK)
 		return 2;
@@ -447,20 +448,26 @@ static int run_watchdog(void)
 		}
 		clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, NULL);
 		st(&ctl->tick, t);
+		/* the event counts from the cycle in which the process has
+		 * really stopped or died (kill() only queues the signal) */
 		if (t == quiet_ticks) {
-			st(&ctl->stop_tick, t);
 			kill(lp, SIGSTOP);
+			waitpid(lp, &wstatus, WUNTRACED);
+			st(&ctl->stop_tick, ld(&ctl->tick));
 		} else if (t == quiet_ticks + 3u * wd_limit) {
 			st(&ctl->cont_tick, t);
 			kill(lp, SIGCONT);
 		} else if (t == quiet_ticks + 4u * wd_limit + quiet_ticks / 4u) {
-			st(&ctl->kill_tick, t);
 			kill(sp, SIGKILL);
+			waitpid(sp, &wstatus, 0);
+			servo_reaped = 1;
+			st(&ctl->kill_tick, ld(&ctl->tick));
 		}
 	}
 	st(&ctl->done, 1);
 	waitpid(lp, NULL, 0);
-	waitpid(sp, NULL, 0);
+	if (!servo_reaped)
+		waitpid(sp, NULL, 0);
 
 	printf("watchdog: period %u us, limit %u cycles\n", period_us, wd_limit);
 	printf("  Linux paused at tick %u: servo detected it at tick %u, after %u servo cycles;"
@@ -470,12 +477,16 @@ static int run_watchdog(void)
 	       ctl->kill_tick, ctl->linux_detect_tick, ctl->linux_cycles_to_detect);
 	printf("  false detections: servo %u (first at tick %u), Linux %u (first at tick %u)\n",
 	       ctl->servo_false, ctl->servo_false_first, ctl->linux_false, ctl->linux_false_first);
-	/* bound: the peer's last beat may land in the cycle of the stop */
-	if (!ctl->servo_detect_tick || ctl->servo_cycles_to_detect > wd_limit + 1u)
+	/* bounds: the peer's last beat may land one cycle before or after
+	 * the cycle of the stop, so detection comes limit +- 1 cycles later;
+	 * earlier would be a false detection, later a missed one */
+	if (!ctl->servo_detect_tick || ctl->servo_cycles_to_detect > wd_limit + 1u ||
+	    ctl->servo_cycles_to_detect + 1u < wd_limit)
 		ok = 0;
 	if (!ctl->servo_recover_tick || ctl->servo_recover_tick < ctl->cont_tick)
 		ok = 0;
-	if (!ctl->linux_detect_tick || ctl->linux_cycles_to_detect > wd_limit + 1u)
+	if (!ctl->linux_detect_tick || ctl->linux_cycles_to_detect > wd_limit + 1u ||
+	    ctl->linux_cycles_to_detect + 1u < wd_limit)
 		ok = 0;
 	if (ctl->servo_false || ctl->linux_false)
 		ok = 0;
