@@ -152,6 +152,8 @@ struct result {
 	uint64_t busy_ns[MOTION_N_TASKS];
 	uint64_t jobs[MOTION_MAX_WORKERS];
 	uint64_t idle[MOTION_MAX_WORKERS];
+	uint64_t job_ns[MOTION_MAX_WORKERS], sched_ns[MOTION_MAX_WORKERS],
+		sleep_ns[MOTION_MAX_WORKERS];
 	const char *names[MOTION_N_TASKS];
 	unsigned n_tasks;
 };
@@ -220,8 +222,12 @@ static int run_pool(struct motion_config c, const char *prog, unsigned workers,
 		for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++)
 			r->jobs[w] += s.runs[t][w];
 	}
-	for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++)
+	for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++) {
 		r->idle[w] = s.idle[w];
+		r->job_ns[w] = s.job_ns[w];
+		r->sched_ns[w] = s.sched_ns[w];
+		r->sleep_ns[w] = s.sleep_ns[w];
+	}
 	int rc = motion_last_error(m) ? -1 : 0;
 	motion_destroy(m);
 	return rc;
@@ -337,13 +343,31 @@ int main(int argc, char **argv)
 	printf("planning-heavy program: %llu arcs/lines, %llu segments, %llu setpoints\n",
 	       (unsigned long long)ref.blocks, (unsigned long long)ref.segments,
 	       (unsigned long long)ref.setpoints);
-	for (int i = 0; i < 4; i++)
+	for (int i = 0; i < 4; i++) {
+		const struct result *b = &cf[i].best;
 		printf("  %-9s %u worker(s): %.3f s wall, %.3f s cpu, jobs per worker %llu/%llu, idle waits %llu/%llu\n",
-		       cf[i].name, cf[i].w, cf[i].best.wall, cf[i].best.cpu,
-		       (unsigned long long)cf[i].best.jobs[0],
-		       (unsigned long long)cf[i].best.jobs[1],
-		       (unsigned long long)cf[i].best.idle[0],
-		       (unsigned long long)cf[i].best.idle[1]);
+		       cf[i].name, cf[i].w, b->wall, b->cpu,
+		       (unsigned long long)b->jobs[0], (unsigned long long)b->jobs[1],
+		       (unsigned long long)b->idle[0], (unsigned long long)b->idle[1]);
+		printf("            worker time in jobs / scheduler path / asleep (ms):");
+		for (unsigned w = 0; w < cf[i].w && w < MOTION_MAX_WORKERS; w++)
+			printf("%s %.1f/%.2f/%.2f", w ? "," : "", b->job_ns[w] * 1e-6,
+			       b->sched_ns[w] * 1e-6, b->sleep_ns[w] * 1e-6);
+		printf("\n");
+	}
+	/* work inflation: job time summed over workers, n workers vs 1 */
+	uint64_t job1 = 0, jobn = 0, schedn = 0;
+	for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++) {
+		job1 += cf[0].best.job_ns[w];
+		jobn += cf[1].best.job_ns[w];
+		schedn += cf[1].best.sched_ns[w];
+	}
+	double inflation = job1 ? (double)jobn / (double)job1 : 0;
+	double sched_share = jobn + schedn ? (double)schedn / (double)(jobn + schedn) : 0;
+	printf("  hybrid, %u workers: time inside jobs %.2fx that of 1 worker for the same work "
+	       "(items crossing cores, and preemption when the machine is busy); "
+	       "scheduler path %.1f%% of worker time\n",
+	       workers, inflation, 100.0 * sched_share);
 	const struct result *h1 = &cf[1 - 1].best;
 	printf("  time per task (hybrid, 1 worker):");
 	uint64_t tot = 0, mx = 0;
@@ -390,13 +414,18 @@ int main(int argc, char **argv)
 			(unsigned long long)ref.blocks, (unsigned long long)ref.segments,
 			(unsigned long long)ref.setpoints, workers, reps);
 		for (int i = 0; i < 4; i++)
-			fprintf(f, "    \"%s\": {\"workers\": %u, \"wall_s\": %.6f, \"cpu_s\": %.6f},\n",
-				cf[i].name, cf[i].w, cf[i].best.wall, cf[i].best.cpu);
+			fprintf(f, "    \"%s\": {\"workers\": %u, \"wall_s\": %.6f, \"cpu_s\": %.6f, \"job_ms\": [%.2f, %.2f], \"sched_ms\": [%.2f, %.2f], \"sleep_ms\": [%.2f, %.2f]},\n",
+				cf[i].name, cf[i].w, cf[i].best.wall, cf[i].best.cpu,
+				cf[i].best.job_ns[0] * 1e-6, cf[i].best.job_ns[1] * 1e-6,
+				cf[i].best.sched_ns[0] * 1e-6, cf[i].best.sched_ns[1] * 1e-6,
+				cf[i].best.sleep_ns[0] * 1e-6, cf[i].best.sleep_ns[1] * 1e-6);
 		fprintf(f, "    \"task_time_share\": {");
 		for (unsigned t = 0; t < h1->n_tasks; t++)
 			fprintf(f, "%s\"%s\": %.4f", t ? ", " : "", h1->names[t],
 				h1->busy_ns[t] / (double)tot);
 		fprintf(f, "},\n");
+		fprintf(f, "    \"job_time_n_over_1\": %.4f,\n", inflation);
+		fprintf(f, "    \"scheduler_path_share_n\": %.4f,\n", sched_share);
 		fprintf(f, "    \"speedup_hybrid_n_over_1\": %.4f,\n", sp_h);
 		fprintf(f, "    \"speedup_hybrid_over_fifo_n\": %.4f,\n", sp_f);
 		fprintf(f, "    \"speedup_bound_largest_task\": %.4f,\n",

@@ -52,58 +52,74 @@ const char *motion_errcode_name(enum motion_errcode code)
 
 /* ---- input: a byte stream with watermarks, or a program in memory ---- */
 
+/* The writer's and the decoder's fields are on separate cache lines
+ * (CL below), so a host thread writing the stream and a worker decoding it
+ * do not bounce one line per line of G-code. */
+#define CL 64
+
 struct source {
 	unsigned char *buf;
 	uint32_t size, mask;
-	_Atomic uint32_t head, tail;      /* free-running byte indices */
-	_Atomic uint32_t lines_in;        /* newlines written */
-	_Atomic uint32_t lines_out;       /* newlines consumed (consumer) */
-	_Atomic uint32_t peak;
-	atomic_bool eos;
 	uint32_t high, low;
-	pthread_mutex_t flow_lock;
-	atomic_int flow;
-	_Atomic uint64_t xoff, xon;
-	/* memory program */
+	/* memory program (read-only after motion_load_program) */
 	bool mem;
 	const char *text;
 	size_t text_len;
-	_Atomic size_t text_pos;
 	uint32_t text_lines;
+	/* writer side */
+	_Alignas(CL) _Atomic uint32_t tail;   /* free-running byte index */
+	_Atomic uint32_t lines_in;            /* newlines written */
+	_Atomic uint32_t peak;
+	atomic_bool eos;
+	/* decoder side */
+	_Alignas(CL) _Atomic uint32_t head;   /* free-running byte index */
+	_Atomic uint32_t lines_out;           /* newlines consumed */
+	_Atomic size_t text_pos;
 	_Atomic uint32_t text_lines_out;
+	/* flow control (both sides, only at the watermarks) */
+	_Alignas(CL) pthread_mutex_t flow_lock;
+	atomic_int flow;
+	_Atomic uint64_t xoff, xon;
 };
 
+/* Each stage's state starts on its own cache line: in threaded mode the
+ * stages run on different cores at the same time, and a write by one
+ * stage must not invalidate the line another stage is reading.  The
+ * counters of a stage are added once per job, not once per item. */
 struct motion {
+	/* read-mostly */
 	struct motion_config cfg;
 	double T;    /* period, s */
 	double ipm;  /* increments per mm */
-	struct source src;
-	struct ring q[MOTION_N_QUEUES]; /* q[0] unused (the source) */
 	struct sched *sched;
 	bool threaded;
 	bool loaded; /* an input was chosen (stream written or program) */
+	struct source src;
+	struct ring q[MOTION_N_QUEUES]; /* q[0] unused (the source) */
 
 	/* error state */
-	atomic_bool faulted;
+	_Alignas(CL) atomic_bool faulted;
 	struct motion_error err;
 	pthread_mutex_t err_lock;
 
 	/* decode */
-	struct gc_state gc;
+	_Alignas(CL) struct gc_state gc;
 	uint32_t lineno;
 	atomic_bool dec_end_pending, dec_end_sent, dec_stop;
 	atomic_bool dec_busy;
+	_Atomic uint64_t n_lines, n_blocks, n_ignored;
 	char linebuf[MOTION_MAX_LINE + 2];
 
 	/* fit */
-	struct gc_block blk;
+	_Alignas(CL) struct gc_block blk;
 	atomic_bool fit_have;
 	atomic_bool fit_busy;
 	uint32_t fit_k, fit_n;
 	double fit_prev[MOTION_MAX_AXES];
+	_Atomic uint64_t n_segs;
 
 	/* look-ahead window */
-	struct seg *win;
+	_Alignas(CL) struct seg *win;
 	double *bwd, *jl;
 	uint32_t w_head, w_n, W;
 	double la_fixed;
@@ -111,21 +127,21 @@ struct motion {
 	double la_prev_u[MOTION_MAX_AXES];
 	double la_prev_vmax;
 
+	/* accel */
+	_Alignas(CL) _Atomic uint64_t n_profiles;
+
 	/* interp */
-	struct profile cur;
+	_Alignas(CL) struct profile cur;
 	bool cur_valid;
 	double tau, tau_start;
 	atomic_bool interp_moving, interp_done;
 
-	/* consumer */
-	struct motion_setpoint last;
+	/* consumer (motion_next_setpoint or the sink task) */
+	_Alignas(CL) struct motion_setpoint last;
 	uint64_t cycle;
 	bool underrun;
 	uint64_t sink_sum;
-
-	/* stats */
-	_Atomic uint64_t n_lines, n_blocks, n_segs, n_profiles, n_setpoints,
-		n_ignored, n_underruns;
+	_Atomic uint64_t n_setpoints, n_underruns;
 };
 
 static void set_error(struct motion *m, enum motion_errcode code, uint32_t line,
@@ -394,6 +410,7 @@ static uint32_t decode_run(void *arg, unsigned worker)
 {
 	struct motion *m = arg;
 	uint32_t done = 0;
+	uint64_t lines = 0, blocks = 0;
 	size_t n;
 
 	(void)worker;
@@ -434,7 +451,7 @@ static uint32_t decode_run(void *arg, unsigned worker)
 			continue;
 		}
 		m->lineno++;
-		atomic_fetch_add_explicit(&m->n_lines, 1, memory_order_relaxed);
+		lines++;
 		done++;
 		if (r == 2) {
 			set_error(m, MOTION_E_LINE_TOO_LONG, m->lineno,
@@ -453,13 +470,15 @@ static uint32_t decode_run(void *arg, unsigned worker)
 		}
 		if (b->kind != GC_NONE) {
 			ring_commit(&m->q[Q_BLOCKS]);
-			atomic_fetch_add_explicit(&m->n_blocks, 1, memory_order_relaxed);
+			blocks++;
 		}
 		if (m->gc.ended) { /* M2 / M30: the rest is not executed */
 			m->dec_stop = true;
 			m->dec_end_pending = true;
 		}
 	}
+	atomic_fetch_add_explicit(&m->n_lines, lines, memory_order_relaxed);
+	atomic_fetch_add_explicit(&m->n_blocks, blocks, memory_order_relaxed);
 	atomic_store(&m->dec_busy, false);
 	return done;
 }
@@ -559,6 +578,7 @@ static uint32_t fit_run(void *arg, unsigned worker)
 {
 	struct motion *m = arg;
 	uint32_t done = 0;
+	uint64_t segs = 0;
 
 	(void)worker;
 	atomic_store(&m->fit_busy, true);
@@ -609,13 +629,14 @@ static uint32_t fit_run(void *arg, unsigned worker)
 		if (make_move(m, s, m->fit_prev, p, m->blk.line, m->blk.feed,
 			      m->blk.kind == GC_RAPID)) {
 			ring_commit(&m->q[Q_SEGS]);
-			atomic_fetch_add_explicit(&m->n_segs, 1, memory_order_relaxed);
+			segs++;
 			memcpy(m->fit_prev, p, sizeof(p));
 		}
 		done++;
 		if (m->fit_k >= m->fit_n)
 			m->fit_have = false;
 	}
+	atomic_fetch_add_explicit(&m->n_segs, segs, memory_order_relaxed);
 	atomic_store(&m->fit_busy, false);
 	return done;
 }
@@ -826,9 +847,9 @@ static uint32_t accel_run(void *arg, unsigned worker)
 		plan_profile(p, in, m->cfg.jerk_limited);
 		ring_release(&m->q[Q_PLANNED]);
 		ring_commit(&m->q[Q_PROFILES]);
-		atomic_fetch_add_explicit(&m->n_profiles, 1, memory_order_relaxed);
 		done++;
 	}
+	atomic_fetch_add_explicit(&m->n_profiles, done, memory_order_relaxed);
 	return done;
 }
 
@@ -1101,9 +1122,12 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	*out = NULL;
 	if (check_config(cfg, err))
 		return -1;
-	m = calloc(1, sizeof(*m));
+	/* cache-line aligned (see struct motion); aligned_alloc wants a
+	 * multiple of the alignment */
+	m = aligned_alloc(CL, (sizeof(*m) + CL - 1) / CL * CL);
 	if (!m)
 		goto nomem;
+	memset(m, 0, sizeof(*m));
 	m->cfg = *cfg;
 	m->T = cfg->period_us * 1e-6;
 	m->ipm = cfg->increments_per_mm;
@@ -1327,8 +1351,12 @@ void motion_get_stats(const struct motion *m, struct motion_stats *st)
 		for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++)
 			st->runs[i][w] = ss.runs[i][w];
 	}
-	for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++)
+	for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++) {
 		st->idle[w] = ss.idle[w];
+		st->job_ns[w] = ss.job_ns[w];
+		st->sleep_ns[w] = ss.sleep_ns[w];
+		st->sched_ns[w] = ss.sched_ns[w];
+	}
 }
 
 int motion_trace_csv(const struct motion *m, FILE *f)

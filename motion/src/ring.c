@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 #include "motion/ring.h"
 
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -13,10 +14,19 @@ int ring_init(struct ring *r, size_t elem, uint32_t cap)
 		return -1;
 	while (size < cap)
 		size <<= 1;
-	r->buf = calloc(size, elem);
+	size_t stride = elem;
+	if (elem >= RING_CACHELINE / 2)
+		stride = (elem + RING_CACHELINE - 1) / RING_CACHELINE * RING_CACHELINE;
+	if ((size_t)size > (SIZE_MAX - RING_CACHELINE) / stride)
+		return -1;
+	r->buf = aligned_alloc(RING_CACHELINE,
+			       ((size_t)size * stride + RING_CACHELINE - 1) /
+				       RING_CACHELINE * RING_CACHELINE);
 	if (!r->buf)
 		return -1;
+	memset(r->buf, 0, (size_t)size * stride);
 	r->elem = elem;
+	r->stride = stride;
 	r->cap = cap;
 	r->mask = size - 1u;
 	atomic_init(&r->head, 0u);

@@ -107,6 +107,8 @@ struct sched {
 	atomic_bool started;
 	struct worker w[SCHED_MAX_WORKERS];
 	uint64_t idle[SCHED_MAX_WORKERS];
+	uint64_t job_ns[SCHED_MAX_WORKERS], sleep_ns[SCHED_MAX_WORKERS];
+	uint64_t life_ns[SCHED_MAX_WORKERS];
 	uint64_t seq;
 	uint64_t t0;
 	/* trace */
@@ -330,6 +332,7 @@ static void *worker_main(void *arg)
 	int prev = -1;
 	uint32_t prev_items = 0;
 	uint64_t prev_ns = 0;
+	uint64_t born = now_ns();
 
 	pthread_mutex_lock(&s->lock);
 	for (;;) {
@@ -338,6 +341,7 @@ static void *worker_main(void *arg)
 			s->t[prev].runs[w->id]++;
 			s->t[prev].items += prev_items;
 			s->t[prev].busy_ns += prev_ns;
+			s->job_ns[w->id] += prev_ns;
 			prev = -1;
 			if (atomic_load(&s->waiting) > 0)
 				pthread_cond_broadcast(&s->cond);
@@ -362,8 +366,10 @@ static void *worker_main(void *arg)
 			ts.tv_sec += (time_t)(ns / 1000000000u);
 			ts.tv_nsec = (long)(ns % 1000000000u);
 			s->idle[w->id]++;
+			uint64_t z0 = now_ns();
 			int rc = pthread_cond_timedwait(&s->cond, &s->lock, &ts);
 			(void)rc;
+			s->sleep_ns[w->id] += now_ns() - z0;
 			atomic_fetch_sub(&s->waiting, 1);
 			continue;
 		}
@@ -375,6 +381,7 @@ static void *worker_main(void *arg)
 		prev_ns = now_ns() - b0;
 		pthread_mutex_lock(&s->lock);
 	}
+	s->life_ns[w->id] += now_ns() - born;
 	pthread_mutex_unlock(&s->lock);
 	return NULL;
 }
@@ -446,6 +453,12 @@ void sched_get_stats(struct sched *s, struct sched_stats *st)
 		st->busy_ns[i] = s->t[i].busy_ns;
 	}
 	memcpy(st->idle, s->idle, sizeof(st->idle));
+	memcpy(st->job_ns, s->job_ns, sizeof(st->job_ns));
+	memcpy(st->sleep_ns, s->sleep_ns, sizeof(st->sleep_ns));
+	for (unsigned w = 0; w < SCHED_MAX_WORKERS; w++) {
+		uint64_t spent = s->job_ns[w] + s->sleep_ns[w];
+		st->sched_ns[w] = s->life_ns[w] > spent ? s->life_ns[w] - spent : 0;
+	}
 	st->decisions = s->seq;
 	pthread_mutex_unlock(&s->lock);
 }

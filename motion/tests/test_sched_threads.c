@@ -154,7 +154,12 @@ static uint64_t run_pool(unsigned workers, struct chain *c, struct sched_stats *
 
 static int t_pool_seed003(void)
 {
-	struct chain *c = calloc(1, sizeof(*c));
+	/* struct ring is cache-line aligned: allocate with its alignment */
+	size_t csz = (sizeof(struct chain) + _Alignof(struct chain) - 1) /
+		     _Alignof(struct chain) * _Alignof(struct chain);
+	struct chain *c = aligned_alloc(_Alignof(struct chain), csz);
+	if (c)
+		memset(c, 0, sizeof(*c));
 	struct sched_stats st;
 	uint64_t el2 = 0, el1 = 0;
 

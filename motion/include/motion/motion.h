@@ -172,6 +172,11 @@ struct motion_stats {
 	uint64_t busy_ns[MOTION_N_TASKS];   /* time spent in each task's jobs */
 	uint64_t idle[MOTION_MAX_WORKERS];
 	unsigned workers;
+	/* threaded mode, per worker: time in jobs, asleep, and in the
+	 * scheduler path (everything else) */
+	uint64_t job_ns[MOTION_MAX_WORKERS];
+	uint64_t sleep_ns[MOTION_MAX_WORKERS];
+	uint64_t sched_ns[MOTION_MAX_WORKERS];
 };
 void motion_get_stats(const struct motion *m, struct motion_stats *st);
 const char *motion_queue_name(unsigned q);

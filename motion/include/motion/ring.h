@@ -4,6 +4,14 @@
  * Rule 1 of the hybrid scheduler (a task never runs on two cores at once)
  * makes every queue of the chain SPSC, so C11 acquire/release atomics are
  * enough.  Storage is allocated once in ring_init().
+ *
+ * Layout for two cores: the producer's index (tail) and the consumer's
+ * index (head) live on separate cache lines, and each side keeps a private
+ * copy of the other side's index.  A side reads the other side's line only
+ * when its copy says the ring is full (producer) or empty (consumer), so a
+ * producer and a consumer running at the same time on two cores do not
+ * bounce one cache line per item.  The struct is cache-line aligned, so an
+ * array of rings shares no line either.
  */
 #ifndef SERVOAMP_MOTION_RING_H
 #define SERVOAMP_MOTION_RING_H
@@ -13,19 +21,30 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#define RING_CACHELINE 64
+
 struct ring {
+	/* read-only after ring_init() */
 	unsigned char *buf;
 	size_t elem;       /* item size, bytes */
+	size_t stride;     /* slot size: elem, rounded up to whole cache
+			      lines for items of a line or more, so that two
+			      items never share a line */
 	uint32_t cap;      /* logical capacity, items */
 	uint32_t mask;     /* storage size - 1 (power of two >= cap) */
-	_Atomic uint32_t head; /* consumer index (free running) */
-	_Atomic uint32_t tail; /* producer index (free running) */
+	/* producer side */
+	_Alignas(RING_CACHELINE) _Atomic uint32_t tail; /* free running */
+	uint32_t head_seen; /* producer's copy of head (may lag) */
 	_Atomic uint32_t peak; /* highest occupancy seen (written by producer) */
+	/* consumer side */
+	_Alignas(RING_CACHELINE) _Atomic uint32_t head; /* free running */
+	uint32_t tail_seen; /* consumer's copy of tail (may lag) */
 };
 
 int ring_init(struct ring *r, size_t elem, uint32_t cap);
 void ring_free(struct ring *r);
 
+/* Any thread (the scheduler's level functions, statistics). */
 static inline uint32_t ring_count(const struct ring *r)
 {
 	uint32_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
@@ -42,29 +61,39 @@ static inline uint32_t ring_room(const struct ring *r)
 static inline void *ring_slot(struct ring *r)
 {
 	uint32_t t = atomic_load_explicit(&r->tail, memory_order_relaxed);
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_acquire);
-	if (t - h >= r->cap)
-		return NULL;
-	return r->buf + (size_t)(t & r->mask) * r->elem;
+	if (t - r->head_seen >= r->cap) {
+		r->head_seen = atomic_load_explicit(&r->head, memory_order_acquire);
+		if (t - r->head_seen >= r->cap)
+			return NULL;
+	}
+	return r->buf + (size_t)(t & r->mask) * r->stride;
 }
 
 static inline void ring_commit(struct ring *r)
 {
 	uint32_t t = atomic_load_explicit(&r->tail, memory_order_relaxed) + 1u;
 	atomic_store_explicit(&r->tail, t, memory_order_release);
-	uint32_t n = t - atomic_load_explicit(&r->head, memory_order_acquire);
-	if (n > atomic_load_explicit(&r->peak, memory_order_relaxed))
-		atomic_store_explicit(&r->peak, n, memory_order_relaxed);
+	/* the occupancy is at most t - head_seen; refresh the copy of head
+	 * only when that bound is a new peak, so the peak stays exact (as of
+	 * this commit) and the consumer's line is read rarely */
+	if (t - r->head_seen > atomic_load_explicit(&r->peak, memory_order_relaxed)) {
+		r->head_seen = atomic_load_explicit(&r->head, memory_order_acquire);
+		uint32_t n = t - r->head_seen;
+		if (n > atomic_load_explicit(&r->peak, memory_order_relaxed))
+			atomic_store_explicit(&r->peak, n, memory_order_relaxed);
+	}
 }
 
 /* Consumer: oldest item, or NULL when empty; then ring_release(). */
 static inline const void *ring_front(struct ring *r)
 {
 	uint32_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
-	if (t == h)
-		return NULL;
-	return r->buf + (size_t)(h & r->mask) * r->elem;
+	if (h == r->tail_seen) {
+		r->tail_seen = atomic_load_explicit(&r->tail, memory_order_acquire);
+		if (h == r->tail_seen)
+			return NULL;
+	}
+	return r->buf + (size_t)(h & r->mask) * r->stride;
 }
 
 static inline void ring_release(struct ring *r)

@@ -104,6 +104,12 @@ struct sched_stats {
 	uint64_t busy_ns[SCHED_MAX_TASKS]; /* time spent in jobs */
 	uint64_t idle[SCHED_MAX_WORKERS];
 	uint64_t decisions;
+	/* per worker, threaded mode: time in jobs, time asleep (nothing
+	 * runnable), and the rest of the worker's life: the scheduler path
+	 * (lock, levels, decision, bookkeeping, wake-ups) */
+	uint64_t job_ns[SCHED_MAX_WORKERS];
+	uint64_t sleep_ns[SCHED_MAX_WORKERS];
+	uint64_t sched_ns[SCHED_MAX_WORKERS];
 };
 void sched_get_stats(struct sched *s, struct sched_stats *st);
 
