@@ -72,4 +72,10 @@ if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$key" ]; t
 	"$venv/bin/python" -m pip install -q -e ".[dev]"
 	echo "$key" >"$stamp"
 fi
+# Node: the independent MCAP reader used by tests/recorder (tools/mcap-verify).
+mv_dir="$here/tools/mcap-verify"; mv_key=$(sha256sum "$mv_dir/package-lock.json" | cut -d' ' -f1)
+if command -v npm >/dev/null && { [ ! -d "$mv_dir/node_modules" ] || [ "$(cat "$mv_dir/node_modules/.servoamp-stamp" 2>/dev/null)" != "$mv_key" ]; }; then
+	log "npm ci in tools/mcap-verify"
+	(cd "$mv_dir" && npm ci --no-audit --no-fund --ignore-scripts --loglevel=error >/dev/null) && echo "$mv_key" >"$mv_dir/node_modules/.servoamp-stamp"
+fi
 log "ready ($scope)"

@@ -1,20 +1,106 @@
-"""servoamp command-line entry point (host side)."""
+"""servoamp command-line entry point (host side).
+
+    servoamp record --connect HOST:PORT -o FILE.mcap [--duration S]
+    servoamp plot FILE.mcap -o DIR [--queues CSV]
+    servoamp info FILE.mcap [--json]
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import signal
 import sys
+import threading
+from types import FrameType
+
+
+def _hostport(s: str) -> tuple[str, int]:
+    host, sep, port = s.rpartition(":")
+    if not sep or not port.isdigit():
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {s!r}")
+    return host.strip("[]") or "127.0.0.1", int(port)
+
+
+def _cmd_record(args: argparse.Namespace) -> int:
+    from servoamp.record import record
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    host, port = args.connect
+    try:
+        res = record(host, port, args.output, args.duration, reconnect=not args.no_reconnect,
+                     stop=stop, connect_timeout=args.connect_timeout,
+                     flush_interval=args.flush_interval, compression=args.compression)
+    except ConnectionError as e:
+        print(f"servoamp record: {e}", file=sys.stderr)
+        return 3
+    if stop.is_set():
+        res.stopped_by = "signal"
+    d = res.as_dict()
+    d["cycles_per_cpu_s"] = round(res.cycles / res.cpu_s) if res.cpu_s > 0 else None
+    if args.json:
+        print(json.dumps(d))
+    else:
+        print(f"recorded {res.cycles} cycles ({res.messages} messages, {len(res.gaps)} gaps, "
+              f"{res.connections} connections) into {res.path} in {res.wall_s:.1f} s "
+              f"(CPU {res.cpu_s:.2f} s); stopped by {res.stopped_by}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="servoamp", description=__doc__)
+    parser = argparse.ArgumentParser(prog="servoamp", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="store_true", help="print the version")
+    sub = parser.add_subparsers(dest="cmd")
+
+    p = sub.add_parser("record", help="record the telemetry stream into an MCAP file")
+    p.add_argument("--connect", type=_hostport, required=True, metavar="HOST:PORT")
+    p.add_argument("-o", "--output", required=True, metavar="FILE.mcap")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="stop after S seconds (default: until SIGINT/SIGTERM)")
+    p.add_argument("--no-reconnect", action="store_true",
+                   help="stop when the stream ends instead of reconnecting")
+    p.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
+                   help="without --duration: give up when no first connection in S seconds")
+    p.add_argument("--flush-interval", type=float, default=1.0, metavar="S",
+                   help="close a chunk at least every S seconds of controller time "
+                        "(bounds what SIGKILL loses)")
+    p.add_argument("--compression", choices=["zstd", "lz4", "none"], default="zstd")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+
+    p = sub.add_parser("plot", help="PNG figures from a recording")
+    p.add_argument("file")
+    p.add_argument("-o", "--output", required=True, metavar="DIR")
+    p.add_argument("--queues", metavar="CSV", help="queue levels from motion_cli --trace")
+
+    p = sub.add_parser("info", help="summary of a recording")
+    p.add_argument("file")
+    p.add_argument("--json", action="store_true")
+
     args = parser.parse_args(argv)
     if args.version:
         from servoamp import __version__
 
         print(__version__)
         return 0
+    if args.cmd == "record":
+        return _cmd_record(args)
+    if args.cmd == "plot":
+        from servoamp.plot import plot
+
+        for f in plot(args.file, args.output, args.queues):
+            print(f)
+        return 0
+    if args.cmd == "info":
+        from servoamp.info import main_info
+
+        return main_info(args.file, args.json)
     parser.print_help()
     return 0
 

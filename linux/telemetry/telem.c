@@ -1,0 +1,934 @@
+// SPDX-License-Identifier: MIT
+/*
+ * telem.c - servoamp telemetry transport: SPSC ring + TCP streaming server.
+ * Wire format: docs/telemetry.md. API: telem.h.
+ */
+#define _GNU_SOURCE
+#include "telem.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/socket.h>
+#include <time.h>
+#include <unistd.h>
+
+#if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "the telemetry wire format is little-endian; add byte swapping for this target"
+#endif
+_Static_assert(ATOMIC_LLONG_LOCK_FREE == 2, "64-bit atomics must be lock-free (RT safety)");
+_Static_assert(ATOMIC_INT_LOCK_FREE == 2, "32-bit atomics must be lock-free");
+
+/* ---- wire sizes (docs/telemetry.md) ---- */
+#define FRAME_HDR 8u
+#define HELLO_LEN 80u
+#define CYCLE_HDR_LEN 52u
+#define AXIS_LEN 36u
+#define STATS_HDR_LEN 104u
+#define COUNTER_LEN 32u
+#define PARAM_LEN 80u
+#define LOG_HDR_LEN 40u
+#define GAP_LEN 40u
+#define QUEUES_HDR_LEN 16u
+#define QUEUE_LEN 24u
+#define EVENT_MAX (FRAME_HDR + LOG_HDR_LEN + TELEM_LOG_MAX)
+#define STATS_MAX (FRAME_HDR + STATS_HDR_LEN + COUNTER_LEN * TELEM_MAX_COUNTERS)
+
+_Static_assert(FRAME_HDR + QUEUES_HDR_LEN + QUEUE_LEN * TELEM_MAX_QUEUES <= EVENT_MAX, "queues");
+_Static_assert(FRAME_HDR + PARAM_LEN <= EVENT_MAX, "param");
+
+#define STATS_F_FINAL 1u
+
+struct telem_slot {
+	uint64_t seq;			/* telem_push_cycle call number, from 0 */
+	struct telem_cycle c;
+};
+
+struct telem_event {
+	uint32_t len;
+	unsigned char data[EVENT_MAX];
+};
+
+struct telem_client {
+	int fd;
+	unsigned char *buf;
+	size_t off, len;		/* pending bytes: buf[off, len) */
+	uint64_t lost, lost_from, lost_to;	/* cycles not sent (buffer full) */
+	uint64_t lost_total;		/* cycles this client lost, in total */
+	uint64_t events_lost;
+};
+
+/* ---- little-endian encoding ---- */
+static unsigned char *put16(unsigned char *p, uint16_t v) { memcpy(p, &v, 2); return p + 2; }
+static unsigned char *put32(unsigned char *p, uint32_t v) { memcpy(p, &v, 4); return p + 4; }
+static unsigned char *puti32(unsigned char *p, int32_t v) { memcpy(p, &v, 4); return p + 4; }
+static unsigned char *put64(unsigned char *p, uint64_t v) { memcpy(p, &v, 8); return p + 8; }
+static unsigned char *putf64(unsigned char *p, double v) { memcpy(p, &v, 8); return p + 8; }
+
+static unsigned char *putstr(unsigned char *p, const char *s, size_t field)
+{
+	size_t n = s ? strnlen(s, field - 1u) : 0u;
+
+	memset(p, 0, field);
+	if (n)
+		memcpy(p, s, n);
+	return p + field;
+}
+
+static unsigned char *frame(unsigned char *p, uint16_t type, uint32_t len)
+{
+	p = put16(p, type);
+	p = put16(p, 0);
+	return put32(p, len);
+}
+
+uint64_t telem_now_ns(void)
+{
+	struct timespec ts;
+
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}
+
+static uint64_t realtime_ns(void)
+{
+	struct timespec ts;
+
+	clock_gettime(CLOCK_REALTIME, &ts);
+	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}
+
+/* ---- SPSC ring ------------------------------------------------------------- */
+int telem_ring_init(struct telem_ring *r, void *storage, uint32_t elem_size, uint32_t capacity)
+{
+	if (!r || !storage || !elem_size || capacity < 2u || capacity > (1u << 30) ||
+	    (capacity & (capacity - 1u)))
+		return -EINVAL;
+	atomic_init(&r->head, 0u);
+	atomic_init(&r->tail, 0u);
+	r->mask = capacity - 1u;
+	r->elem_size = elem_size;
+	r->slots = storage;
+	return 0;
+}
+
+void *telem_ring_write_slot(struct telem_ring *r)
+{
+	uint32_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
+	uint32_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
+
+	if (h - t > r->mask)
+		return NULL;	/* full */
+	return r->slots + (size_t)(h & r->mask) * r->elem_size;
+}
+
+void telem_ring_commit_write(struct telem_ring *r)
+{
+	uint32_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
+
+	atomic_store_explicit(&r->head, h + 1u, memory_order_release);
+}
+
+const void *telem_ring_read_slot(struct telem_ring *r)
+{
+	uint32_t t = atomic_load_explicit(&r->tail, memory_order_relaxed);
+	uint32_t h = atomic_load_explicit(&r->head, memory_order_acquire);
+
+	if (h == t)
+		return NULL;
+	return r->slots + (size_t)(t & r->mask) * r->elem_size;
+}
+
+void telem_ring_commit_read(struct telem_ring *r)
+{
+	uint32_t t = atomic_load_explicit(&r->tail, memory_order_relaxed);
+
+	atomic_store_explicit(&r->tail, t + 1u, memory_order_release);
+}
+
+uint32_t telem_ring_level(const struct telem_ring *r)
+{
+	uint32_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
+	uint32_t h = atomic_load_explicit(&r->head, memory_order_acquire);
+
+	return h - t;
+}
+
+/* ---- configuration ----------------------------------------------------------- */
+void telem_cfg_defaults(struct telem_cfg *cfg)
+{
+	memset(cfg, 0, sizeof(*cfg));
+	cfg->listen_addr = "0.0.0.0";
+	cfg->port = TELEM_DEFAULT_PORT;
+	cfg->controller_id = "servoamp";
+	cfg->n_axes = AMP_MAX_AXES;
+	cfg->cycle_period_ns = 1000000u;
+	cfg->clock_hz = 1000000000u;
+	cfg->ring_capacity = 4096u;
+	cfg->event_capacity = 256u;
+	cfg->client_buffer = 1u << 20;
+	cfg->max_clients = 4u;
+	cfg->drain_interval_us = 2000u;
+	cfg->stats_interval_ms = 1000u;
+	cfg->linger_ms = 1000u;
+}
+
+static uint64_t random_id(void)
+{
+	uint64_t v = 0;
+	int fd = open("/dev/urandom", O_RDONLY | O_CLOEXEC);
+
+	if (fd >= 0) {
+		if (read(fd, &v, sizeof(v)) != (ssize_t)sizeof(v))
+			v = 0;
+		close(fd);
+	}
+	if (!v)
+		v = realtime_ns() ^ ((uint64_t)getpid() << 32);
+	return v ? v : 1u;
+}
+
+static int listen_on(struct telem *t)
+{
+	struct addrinfo hints, *ai = NULL;
+	char port[8];
+	int fd, one = 1, rc;
+
+	memset(&hints, 0, sizeof(hints));
+	hints.ai_family = AF_UNSPEC;
+	hints.ai_socktype = SOCK_STREAM;
+	hints.ai_flags = AI_PASSIVE | AI_NUMERICHOST | AI_NUMERICSERV;
+	snprintf(port, sizeof(port), "%u", (unsigned)t->cfg.port);
+	rc = getaddrinfo(t->cfg.listen_addr, port, &hints, &ai);
+	if (rc || !ai)
+		return -EINVAL;
+	fd = socket(ai->ai_family, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+	if (fd < 0) {
+		rc = -errno;
+		freeaddrinfo(ai);
+		return rc;
+	}
+	setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
+	if (bind(fd, ai->ai_addr, ai->ai_addrlen) || listen(fd, 8)) {
+		rc = -errno;
+		close(fd);
+		freeaddrinfo(ai);
+		return rc;
+	}
+	freeaddrinfo(ai);
+	{
+		struct sockaddr_storage ss;
+		socklen_t sl = sizeof(ss);
+
+		if (getsockname(fd, (struct sockaddr *)&ss, &sl) == 0) {
+			if (ss.ss_family == AF_INET)
+				t->port = ntohs(((struct sockaddr_in *)&ss)->sin_port);
+			else if (ss.ss_family == AF_INET6)
+				t->port = ntohs(((struct sockaddr_in6 *)&ss)->sin6_port);
+		}
+	}
+	t->listen_fd = fd;
+	return 0;
+}
+
+int telem_init(struct telem *t, const struct telem_cfg *cfg)
+{
+	size_t ring_bytes;
+	int rc;
+
+	memset(t, 0, sizeof(*t));
+	t->listen_fd = -1;
+	t->wake_fd[0] = t->wake_fd[1] = -1;
+	if (!cfg || !cfg->listen_addr || cfg->n_axes < 1u || cfg->n_axes > AMP_MAX_AXES ||
+	    cfg->event_capacity < 1u || cfg->max_clients < 1u || cfg->max_clients > TELEM_MAX_CLIENTS ||
+	    cfg->client_buffer < 64u * 1024u || cfg->drain_interval_us < 100u ||
+	    cfg->ring_capacity < 2u || (cfg->ring_capacity & (cfg->ring_capacity - 1u)))
+		return -EINVAL;
+	t->cfg = *cfg;
+	snprintf(t->controller_id, sizeof(t->controller_id), "%s",
+		 cfg->controller_id ? cfg->controller_id : "");
+	t->cfg.controller_id = t->controller_id;
+	t->session_id = random_id();
+
+	ring_bytes = (size_t)cfg->ring_capacity * sizeof(struct telem_slot);
+	t->ring_mem = calloc(1, ring_bytes);
+	t->ev = calloc(cfg->event_capacity, sizeof(struct telem_event));
+	t->clients = calloc(TELEM_MAX_CLIENTS, sizeof(struct telem_client));
+	t->scratch_cap = FRAME_HDR + CYCLE_HDR_LEN + AXIS_LEN * AMP_MAX_AXES + EVENT_MAX;
+	t->scratch = malloc(t->scratch_cap);
+	if (!t->ring_mem || !t->ev || !t->clients || !t->scratch) {
+		rc = -ENOMEM;
+		goto fail;
+	}
+	if (cfg->mlock)
+		(void)mlock(t->ring_mem, ring_bytes);	/* best effort; servod also mlockall()s */
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
+		t->clients[i].fd = -1;
+	rc = telem_ring_init(&t->ring, t->ring_mem, sizeof(struct telem_slot), cfg->ring_capacity);
+	if (rc)
+		goto fail;
+	t->ev_cap = cfg->event_capacity;
+	if (pthread_mutex_init(&t->ev_lock, NULL)) {
+		rc = -ENOMEM;
+		goto fail;
+	}
+	if (pipe2(t->wake_fd, O_CLOEXEC | O_NONBLOCK)) {
+		rc = -errno;
+		pthread_mutex_destroy(&t->ev_lock);
+		goto fail;
+	}
+	t->port = cfg->port;
+	rc = listen_on(t);
+	if (rc) {
+		pthread_mutex_destroy(&t->ev_lock);
+		close(t->wake_fd[0]);
+		close(t->wake_fd[1]);
+		goto fail;
+	}
+	return 0;
+fail:
+	free(t->ring_mem);
+	free(t->ev);
+	free(t->clients);
+	free(t->scratch);
+	t->ring_mem = NULL;
+	t->ev = NULL;
+	t->clients = NULL;
+	t->scratch = NULL;
+	t->wake_fd[0] = t->wake_fd[1] = -1;
+	return rc;
+}
+
+uint16_t telem_port(const struct telem *t)
+{
+	return t->port;
+}
+
+/* ---- producers ---------------------------------------------------------------- */
+int telem_push_cycle(struct telem *t, const struct telem_cycle *rec)
+{
+	uint64_t seq = t->push_seq++;
+	struct telem_slot *s;
+
+	atomic_store_explicit(&t->pushed, t->push_seq, memory_order_relaxed);
+	atomic_store_explicit(&t->last_cycle, rec->cycle, memory_order_relaxed);
+	s = telem_ring_write_slot(&t->ring);
+	if (!s) {
+		t->drop_local++;
+		atomic_store_explicit(&t->dropped, t->drop_local, memory_order_relaxed);
+		return -1;
+	}
+	s->seq = seq;
+	s->c = *rec;
+	telem_ring_commit_write(&t->ring);
+	return 0;
+}
+
+static int push_event(struct telem *t, const unsigned char *data, uint32_t len)
+{
+	int rc = 0;
+
+	pthread_mutex_lock(&t->ev_lock);
+	if (t->ev_head - t->ev_tail >= t->ev_cap) {
+		atomic_fetch_add_explicit(&t->events_dropped, 1u, memory_order_relaxed);
+		rc = -1;
+	} else {
+		struct telem_event *e = &t->ev[t->ev_head % t->ev_cap];
+
+		e->len = len;
+		memcpy(e->data, data, len);
+		t->ev_head++;
+		atomic_fetch_add_explicit(&t->events, 1u, memory_order_relaxed);
+	}
+	pthread_mutex_unlock(&t->ev_lock);
+	return rc;
+}
+
+static uint64_t now_or(uint64_t t_ns)
+{
+	return t_ns ? t_ns : telem_now_ns();
+}
+
+int telem_push_param(struct telem *t, uint64_t t_ns, uint32_t id, const char *name,
+		     uint32_t type, double value, const char *unit)
+{
+	unsigned char b[FRAME_HDR + PARAM_LEN], *p = b;
+
+	p = frame(p, TELEM_MSG_PARAM, PARAM_LEN);
+	p = put64(p, now_or(t_ns));
+	p = put64(p, atomic_load_explicit(&t->last_cycle, memory_order_relaxed));
+	p = put32(p, id);
+	p = put32(p, type);
+	p = putf64(p, value);
+	p = putstr(p, name, TELEM_NAME_LEN);
+	p = putstr(p, unit, TELEM_UNIT_LEN);
+	return push_event(t, b, (uint32_t)(p - b));
+}
+
+int telem_push_log(struct telem *t, uint64_t t_ns, uint32_t level, const char *source,
+		   const char *text, size_t len)
+{
+	unsigned char b[EVENT_MAX], *p = b;
+
+	if (!text)
+		len = 0;
+	if (len > TELEM_LOG_MAX)
+		len = TELEM_LOG_MAX;
+	while (len && (text[len - 1] == '\n' || text[len - 1] == '\r'))
+		len--;
+	p = frame(p, TELEM_MSG_LOG, LOG_HDR_LEN + (uint32_t)len);
+	p = put64(p, now_or(t_ns));
+	p = put64(p, atomic_load_explicit(&t->last_cycle, memory_order_relaxed));
+	p = put32(p, level);
+	p = put32(p, (uint32_t)len);
+	p = putstr(p, source, TELEM_SOURCE_LEN);
+	if (len)
+		memcpy(p, text, len);
+	p += len;
+	return push_event(t, b, (uint32_t)(p - b));
+}
+
+static unsigned char *enc_gap(unsigned char *p, uint64_t t_ns, uint64_t from, uint64_t to,
+			      uint64_t count, uint32_t reason)
+{
+	p = frame(p, TELEM_MSG_GAP, GAP_LEN);
+	p = put64(p, t_ns);
+	p = put64(p, from);
+	p = put64(p, to);
+	p = put64(p, count);
+	p = put32(p, reason);
+	return put32(p, 0);
+}
+
+int telem_push_gap(struct telem *t, uint64_t t_ns, uint64_t from_cycle, uint64_t to_cycle,
+		   uint64_t count, uint32_t reason)
+{
+	unsigned char b[FRAME_HDR + GAP_LEN];
+
+	enc_gap(b, now_or(t_ns), from_cycle, to_cycle, count, reason);
+	return push_event(t, b, sizeof(b));
+}
+
+int telem_push_queues(struct telem *t, uint64_t t_ns, const struct telem_queue_level *q,
+		      unsigned n)
+{
+	unsigned char b[EVENT_MAX], *p = b;
+
+	if (n > TELEM_MAX_QUEUES)
+		n = TELEM_MAX_QUEUES;
+	p = frame(p, TELEM_MSG_QUEUES, QUEUES_HDR_LEN + QUEUE_LEN * n);
+	p = put64(p, now_or(t_ns));
+	p = put32(p, n);
+	p = put32(p, 0);
+	for (unsigned i = 0; i < n; i++) {
+		p = putstr(p, q[i].name, TELEM_QUEUE_NAME_LEN);
+		p = put32(p, q[i].level);
+		p = put32(p, q[i].capacity);
+	}
+	return push_event(t, b, (uint32_t)(p - b));
+}
+
+void telem_get_stats(struct telem *t, struct telem_stats *st)
+{
+	memset(st, 0, sizeof(*st));
+	st->pushed = atomic_load_explicit(&t->pushed, memory_order_relaxed);
+	st->dropped = atomic_load_explicit(&t->dropped, memory_order_relaxed);
+	st->drained = atomic_load_explicit(&t->drained, memory_order_relaxed);
+	st->events = atomic_load_explicit(&t->events, memory_order_relaxed);
+	st->events_dropped = atomic_load_explicit(&t->events_dropped, memory_order_relaxed);
+	st->client_lost = atomic_load_explicit(&t->client_lost, memory_order_relaxed);
+	st->bytes_sent = atomic_load_explicit(&t->bytes_sent, memory_order_relaxed);
+	st->clients_total = atomic_load_explicit(&t->clients_total, memory_order_relaxed);
+	st->clients = atomic_load_explicit(&t->clients_now, memory_order_relaxed);
+	st->ring_high_water = atomic_load_explicit(&t->ring_high_water, memory_order_relaxed);
+}
+
+/* ---- drain thread: clients ------------------------------------------------------ */
+static void client_close(struct telem *t, struct telem_client *c)
+{
+	if (c->fd < 0)
+		return;
+	close(c->fd);
+	c->fd = -1;
+	free(c->buf);
+	c->buf = NULL;
+	c->off = c->len = 0;
+	atomic_fetch_sub_explicit(&t->clients_now, 1u, memory_order_relaxed);
+}
+
+static size_t client_room(struct telem *t, struct telem_client *c, size_t need)
+{
+	if (t->cfg.client_buffer - c->len < need && c->off) {
+		memmove(c->buf, c->buf + c->off, c->len - c->off);
+		c->len -= c->off;
+		c->off = 0;
+	}
+	return t->cfg.client_buffer - c->len;
+}
+
+static void client_append(struct telem_client *c, const void *m, size_t n)
+{
+	memcpy(c->buf + c->len, m, n);
+	c->len += n;
+}
+
+/* Bytes kept free for non-cycle messages (PARAM, LOG, GAP, STATS) so that a
+ * slow client loses cycle records first. */
+#define EVENT_RESERVE (16u * 1024u)
+
+/* Queue one message for a client. For CYCLE messages (cycle != NULL) a full
+ * buffer loses the record and opens a client-overflow gap, which is sent
+ * before the next message that fits. */
+static void client_put(struct telem *t, struct telem_client *c, const unsigned char *m, size_t n,
+		       const uint64_t *cycle, uint64_t t_ns)
+{
+	size_t need = n + (c->lost ? FRAME_HDR + GAP_LEN : 0u) + (cycle ? EVENT_RESERVE : 0u);
+
+	if (c->fd < 0)
+		return;
+	if (client_room(t, c, need) < need) {
+		if (cycle) {
+			if (!c->lost)
+				c->lost_from = *cycle;
+			c->lost_to = *cycle;
+			c->lost++;
+			c->lost_total++;
+			atomic_fetch_add_explicit(&t->client_lost, 1u, memory_order_relaxed);
+		} else {
+			c->events_lost++;
+		}
+		return;
+	}
+	if (c->lost) {
+		unsigned char g[FRAME_HDR + GAP_LEN];
+
+		enc_gap(g, t_ns, c->lost_from, c->lost_to, c->lost, TELEM_GAP_CLIENT_OVERFLOW);
+		client_append(c, g, sizeof(g));
+		c->lost = 0;
+	}
+	client_append(c, m, n);
+}
+
+/* A ring-overflow gap (cycles from..to dropped by the producer). A client
+ * whose buffer cannot take it gets the range folded into its own overflow
+ * gap, so that every missing cycle is still covered by exactly one GAP. */
+static void broadcast_ring_gap(struct telem *t, uint64_t t_ns, uint64_t from, uint64_t to,
+			       uint64_t count)
+{
+	unsigned char g[FRAME_HDR + GAP_LEN];
+
+	enc_gap(g, t_ns, from, to, count, TELEM_GAP_RING_OVERFLOW);
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++) {
+		struct telem_client *c = &t->clients[i];
+		size_t need = sizeof(g) + (c->lost ? FRAME_HDR + GAP_LEN : 0u);
+
+		if (c->fd < 0)
+			continue;
+		if (!c->lost && client_room(t, c, need) >= need) {
+			client_append(c, g, sizeof(g));
+		} else if (c->lost && client_room(t, c, need) >= need) {
+			client_put(t, c, g, sizeof(g), NULL, t_ns);
+		} else {
+			if (!c->lost)
+				c->lost_from = from;
+			c->lost_to = to;
+			c->lost += count;
+		}
+	}
+}
+
+static void broadcast(struct telem *t, const unsigned char *m, size_t n, const uint64_t *cycle,
+		      uint64_t t_ns)
+{
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
+		if (t->clients[i].fd >= 0)
+			client_put(t, &t->clients[i], m, n, cycle, t_ns);
+}
+
+static size_t enc_hello(struct telem *t, unsigned char *b)
+{
+	unsigned char *p = frame(b, TELEM_MSG_HELLO, HELLO_LEN);
+
+	p = put32(p, TELEM_MAGIC);
+	p = put16(p, TELEM_WIRE_VERSION);
+	p = put16(p, 0);
+	p = put64(p, t->session_id);
+	p = put64(p, telem_now_ns());
+	p = put64(p, realtime_ns());
+	p = put32(p, t->cfg.n_axes);
+	p = put32(p, t->cfg.cycle_period_ns);
+	p = put32(p, t->cfg.clock_hz);
+	p = put32(p, t->cfg.ring_capacity);
+	p = putstr(p, t->controller_id, TELEM_ID_LEN);
+	return (size_t)(p - b);
+}
+
+static void accept_clients(struct telem *t)
+{
+	for (;;) {
+		int fd = accept4(t->listen_fd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
+		struct telem_client *c = NULL;
+		unsigned char hello[FRAME_HDR + HELLO_LEN];
+		int one = 1;
+
+		if (fd < 0)
+			return;
+		if (atomic_load_explicit(&t->clients_now, memory_order_relaxed) < t->cfg.max_clients)
+			for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
+				if (t->clients[i].fd < 0) {
+					c = &t->clients[i];
+					break;
+				}
+		if (!c || !(c->buf = malloc(t->cfg.client_buffer))) {
+			close(fd);	/* too many clients */
+			continue;
+		}
+		setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
+		c->fd = fd;
+		c->off = c->len = 0;
+		c->lost = c->lost_total = c->events_lost = 0;
+		atomic_fetch_add_explicit(&t->clients_now, 1u, memory_order_relaxed);
+		atomic_fetch_add_explicit(&t->clients_total, 1u, memory_order_relaxed);
+		client_append(c, hello, enc_hello(t, hello));
+	}
+}
+
+static void client_read(struct telem *t, struct telem_client *c)
+{
+	char sink[256];
+
+	for (;;) {
+		ssize_t n = recv(c->fd, sink, sizeof(sink), MSG_DONTWAIT);
+
+		if (n > 0)
+			continue;	/* clients send nothing we use */
+		if (n == 0 || (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
+			client_close(t, c);
+		return;
+	}
+}
+
+static void client_flush(struct telem *t, struct telem_client *c)
+{
+	while (c->fd >= 0 && c->off < c->len) {
+		ssize_t n = send(c->fd, c->buf + c->off, c->len - c->off, MSG_DONTWAIT | MSG_NOSIGNAL);
+
+		if (n > 0) {
+			c->off += (size_t)n;
+			atomic_fetch_add_explicit(&t->bytes_sent, (uint64_t)n, memory_order_relaxed);
+		} else if (n < 0 && errno == EINTR) {
+			continue;
+		} else if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+			return;
+		} else {
+			client_close(t, c);
+		}
+	}
+	if (c->fd >= 0 && c->off == c->len)
+		c->off = c->len = 0;
+}
+
+/* ---- drain thread: messages -------------------------------------------------------- */
+static size_t enc_cycle(struct telem *t, unsigned char *b, const struct telem_cycle *c)
+{
+	uint32_t n = t->cfg.n_axes;
+	unsigned char *p = frame(b, TELEM_MSG_CYCLE, CYCLE_HDR_LEN + AXIS_LEN * n);
+
+	p = put64(p, c->cycle);
+	p = put64(p, c->t_ns);
+	p = put32(p, c->servo_cycle);
+	p = put32(p, c->t_cycle);
+	p = put32(p, c->irq_latency);
+	p = put32(p, c->wake_latency_ns);
+	p = put32(p, c->exchange);
+	p = put32(p, c->missed);
+	p = put32(p, c->servo_status);
+	p = puti32(p, c->result);
+	p = put32(p, c->n_axes < n ? c->n_axes : n);	/* axes with data */
+	for (uint32_t i = 0; i < n; i++) {
+		static const struct amp_cmd_axis zc;
+		static const struct amp_fb_axis zf;
+		const struct amp_cmd_axis *a = i < c->n_axes ? &c->cmd[i] : &zc;
+		const struct amp_fb_axis *f = i < c->n_axes ? &c->fb[i] : &zf;
+
+		p = put32(p, a->control_word);
+		p = puti32(p, a->target_pos);
+		p = puti32(p, a->vel_ff);
+		p = puti32(p, a->torque_offset);
+		p = put32(p, f->status_word);
+		p = puti32(p, f->actual_pos);
+		p = puti32(p, f->actual_vel);
+		p = puti32(p, f->current);
+		p = puti32(p, f->following_error);
+	}
+	return (size_t)(p - b);
+}
+
+static void drain_ring(struct telem *t)
+{
+	const struct telem_slot *s;
+	uint32_t level = telem_ring_level(&t->ring);
+
+	if (level > atomic_load_explicit(&t->ring_high_water, memory_order_relaxed))
+		atomic_store_explicit(&t->ring_high_water, level, memory_order_relaxed);
+	while ((s = telem_ring_read_slot(&t->ring)) != NULL) {
+		uint64_t seq = s->seq, cyc = s->c.cycle, t_ns = s->c.t_ns;
+		size_t n = enc_cycle(t, t->scratch, &s->c);
+
+		telem_ring_commit_read(&t->ring);
+		atomic_fetch_add_explicit(&t->drained, 1u, memory_order_relaxed);
+		if (seq != t->expect_seq) {
+			/* records expect_seq .. seq-1 were dropped by the producer */
+			uint64_t lost = seq - t->expect_seq;
+			uint64_t from = t->have_prev ? t->prev_cycle + 1u : cyc - lost;
+
+			broadcast_ring_gap(t, t_ns, from, cyc - 1u, lost);
+		}
+		t->expect_seq = seq + 1u;
+		t->prev_cycle = cyc;
+		t->have_prev = 1;
+		broadcast(t, t->scratch, n, &cyc, t_ns);
+	}
+}
+
+static void drain_events(struct telem *t)
+{
+	for (;;) {
+		struct telem_event *e;
+		uint64_t t_ns;
+
+		pthread_mutex_lock(&t->ev_lock);
+		if (t->ev_tail == t->ev_head) {
+			pthread_mutex_unlock(&t->ev_lock);
+			return;
+		}
+		e = &t->ev[t->ev_tail % t->ev_cap];
+		/* copy out under the lock: producers may reuse the slot after */
+		memcpy(t->scratch, e->data, e->len);
+		{
+			uint32_t len = e->len;
+
+			t->ev_tail++;
+			pthread_mutex_unlock(&t->ev_lock);
+			memcpy(&t_ns, t->scratch + FRAME_HDR, 8);
+			broadcast(t, t->scratch, len, NULL, t_ns);
+		}
+	}
+}
+
+static void send_stats(struct telem *t, uint32_t flags)
+{
+	struct telem_counter ctr[TELEM_MAX_COUNTERS];
+	unsigned nc = 0;
+	unsigned char b[STATS_MAX];
+	struct telem_stats st;
+	uint64_t now = telem_now_ns();
+
+	memset(ctr, 0, sizeof(ctr));
+	if (t->cfg.app_counters) {
+		nc = t->cfg.app_counters(t->cfg.app_arg, ctr, TELEM_MAX_COUNTERS);
+		if (nc > TELEM_MAX_COUNTERS)
+			nc = TELEM_MAX_COUNTERS;
+	}
+	telem_get_stats(t, &st);
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++) {
+		struct telem_client *c = &t->clients[i];
+		unsigned char *p;
+
+		if (c->fd < 0)
+			continue;
+		p = frame(b, TELEM_MSG_STATS, STATS_HDR_LEN + COUNTER_LEN * nc);
+		p = put64(p, now);
+		p = put64(p, t->prev_cycle);
+		p = put64(p, st.pushed);
+		p = put64(p, st.dropped);
+		p = put64(p, st.drained);
+		p = put64(p, c->lost_total);
+		p = put64(p, c->events_lost);
+		p = put64(p, st.events);
+		p = put64(p, st.events_dropped);
+		p = put64(p, st.bytes_sent);
+		p = put32(p, st.ring_high_water);
+		p = put32(p, t->cfg.ring_capacity);
+		p = put32(p, st.clients);
+		p = put32(p, flags);
+		p = put32(p, nc);
+		p = put32(p, 0);
+		for (unsigned k = 0; k < nc; k++) {
+			p = putstr(p, ctr[k].name, TELEM_COUNTER_NAME_LEN);
+			p = put64(p, ctr[k].value);
+		}
+		client_put(t, c, b, (size_t)(p - b), NULL, now);
+	}
+}
+
+static int poll_clients(struct telem *t, int timeout_ms)
+{
+	struct pollfd pfd[2 + TELEM_MAX_CLIENTS];
+	int idx[TELEM_MAX_CLIENTS];
+	unsigned n = 0;
+	int rc;
+
+	pfd[n].fd = t->listen_fd;
+	pfd[n++].events = POLLIN;
+	pfd[n].fd = t->wake_fd[0];
+	pfd[n++].events = POLLIN;
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++) {
+		struct telem_client *c = &t->clients[i];
+
+		idx[i] = -1;
+		if (c->fd < 0)
+			continue;
+		idx[i] = (int)n;
+		pfd[n].fd = c->fd;
+		pfd[n++].events = (short)(POLLIN | (c->off < c->len ? POLLOUT : 0));
+	}
+	rc = poll(pfd, n, timeout_ms);
+	if (rc <= 0)
+		return rc;
+	if (pfd[1].revents & POLLIN) {
+		char sink[64];
+
+		while (read(t->wake_fd[0], sink, sizeof(sink)) > 0)
+			;
+	}
+	if (pfd[0].revents & POLLIN)
+		accept_clients(t);
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
+		if (idx[i] >= 0 && (pfd[idx[i]].revents & (POLLIN | POLLHUP | POLLERR)))
+			client_read(t, &t->clients[i]);
+	return rc;
+}
+
+static void flush_all(struct telem *t)
+{
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
+		client_flush(t, &t->clients[i]);
+}
+
+static int pending(struct telem *t)
+{
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
+		if (t->clients[i].fd >= 0 && t->clients[i].off < t->clients[i].len)
+			return 1;
+	return 0;
+}
+
+static void *drain_main(void *arg)
+{
+	struct telem *t = arg;
+	int tick_ms = (int)(t->cfg.drain_interval_us / 1000u);
+	uint64_t next_stats = telem_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
+
+	if (tick_ms < 1)
+		tick_ms = 1;
+	while (atomic_load_explicit(&t->running, memory_order_acquire)) {
+		poll_clients(t, tick_ms);
+		drain_ring(t);
+		drain_events(t);
+		if (t->cfg.stats_interval_ms && telem_now_ns() >= next_stats) {
+			send_stats(t, 0);
+			next_stats += (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
+			if (next_stats < telem_now_ns())
+				next_stats = telem_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
+		}
+		flush_all(t);
+	}
+	/* last drain: the cycle thread has stopped pushing (telem_stop contract) */
+	drain_ring(t);
+	{
+		uint64_t pushed = atomic_load_explicit(&t->pushed, memory_order_acquire);
+
+		if (pushed > t->expect_seq) {	/* dropped records at the very end */
+			uint64_t last = atomic_load_explicit(&t->last_cycle, memory_order_relaxed);
+			uint64_t lost = pushed - t->expect_seq;
+			uint64_t now = telem_now_ns();
+
+			broadcast_ring_gap(t, now, t->have_prev ? t->prev_cycle + 1u : last + 1u - lost,
+					   last, lost);
+			t->expect_seq = pushed;
+		}
+	}
+	drain_events(t);
+	{
+		uint64_t end = telem_now_ns() + (uint64_t)t->cfg.linger_ms * 1000000ull;
+
+		/* flush first so that the final STATS finds room, then once more */
+		for (int pass = 0; pass < 2; pass++) {
+			if (pass)
+				send_stats(t, STATS_F_FINAL);
+			flush_all(t);
+			while (pending(t) && telem_now_ns() < end) {
+				poll_clients(t, 5);
+				flush_all(t);
+			}
+		}
+	}
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++) {
+		struct telem_client *c = &t->clients[i];
+
+		if (c->fd >= 0) {
+			shutdown(c->fd, SHUT_WR);
+			client_read(t, c);	/* drop anything the client sent */
+			client_close(t, c);
+		}
+	}
+	return NULL;
+}
+
+int telem_start(struct telem *t)
+{
+	int rc;
+
+	if (t->started)
+		return -EALREADY;
+	atomic_store_explicit(&t->running, 1, memory_order_release);
+	rc = pthread_create(&t->thread, NULL, drain_main, t);
+	if (rc) {
+		atomic_store_explicit(&t->running, 0, memory_order_release);
+		return -rc;
+	}
+	t->started = 1;
+	return 0;
+}
+
+void telem_stop(struct telem *t)
+{
+	if (!t->started)
+		return;
+	atomic_store_explicit(&t->running, 0, memory_order_release);
+	if (write(t->wake_fd[1], "x", 1) < 0) {
+		/* the drain thread also wakes up every drain interval */
+	}
+	pthread_join(t->thread, NULL);
+	t->started = 0;
+}
+
+void telem_destroy(struct telem *t)
+{
+	telem_stop(t);
+	if (t->clients)
+		for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
+			client_close(t, &t->clients[i]);
+	if (t->listen_fd >= 0)
+		close(t->listen_fd);
+	if (t->wake_fd[0] >= 0) {
+		close(t->wake_fd[0]);
+		close(t->wake_fd[1]);
+		pthread_mutex_destroy(&t->ev_lock);
+	}
+	free(t->ring_mem);
+	free(t->ev);
+	free(t->clients);
+	free(t->scratch);
+	memset(t, 0, sizeof(*t));
+	t->listen_fd = -1;
+	t->wake_fd[0] = t->wake_fd[1] = -1;
+}
