@@ -5,7 +5,9 @@
 #
 # Contents: Debian's busybox-static:armhf as the whole userland, /init
 # (init.sh: mounts proc, sys, devtmpfs, debugfs, loads the remoteproc module,
-# runs a shell on the console ttyPS0), the module given with --module in
+# runs a shell on the console ttyPS0), /usr/sbin/servoamp-net (net-up.sh:
+# eth0 up with 10.0.2.15/24 for QEMU user networking, run on demand, e.g. by
+# the recording tests before servod), the module given with --module in
 # /lib/modules/, every --firmware file in /lib/firmware/ (same name), and
 # every --bin file (static armhf programs: servod, ampctl) in /usr/bin/.
 #
@@ -85,7 +87,7 @@ flock -u 9
 
 # 2. Cache key over every input.
 key=$({
-	sha256sum "$deb" "$here/init.sh" "$0" | cut -d' ' -f1
+	sha256sum "$deb" "$here/init.sh" "$here/net-up.sh" "$0" | cut -d' ' -f1
 	[ -z "$module" ] || printf '%s %s\n' "$(sha256sum <"$module")" "$(basename "$module")"
 	for f in "${firmware[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 	for f in "${bins[@]}"; do printf 'bin %s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
@@ -123,6 +125,7 @@ list=$stage/list
 	echo "file /bin/busybox $bb 755 0 0"
 	echo "slink /bin/sh busybox 777 0 0"
 	echo "file /init $here/init.sh 755 0 0"
+	echo "file /usr/sbin/servoamp-net $here/net-up.sh 755 0 0"
 	[ -z "$module" ] || echo "file /lib/modules/$(basename "$module") $module 644 0 0"
 	for f in "${firmware[@]}"; do
 		echo "file /lib/firmware/$(basename "$f") $f 644 0 0"

@@ -3,7 +3,8 @@
  * servod - the Linux side of the servo cycle (seed 000's Linux steps).
  *
  *   servod [-s SOCKET] [-p PARAMFILE] [-a AMPLITUDE_INC] [-f FREQ_HZ]
- *          [--ttc-hz HZ] [--prio N] [-v]
+ *          [--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N]
+ *          [--telemetry ADDR:PORT|off] [--id CONTROLLER_ID] [-v]
  *
  * Cycle thread (SCHED_FIFO, mlockall): waits for the cycle interrupt with
  * read() on the UIO device "cycle-interrupt", acknowledges its own flag
@@ -28,6 +29,15 @@
  *    firmware, which re-attaches in the same epoch.
  *  - a Unix socket serves status, statistics and the parameter service
  *    to ampctl.
+ *
+ * Telemetry (linux/telemetry, docs/telemetry.md, default 0.0.0.0:7700): the
+ * cycle thread pushes one record per cycle right after amp_linux_cycle()
+ * into the library's lock-free ring (no syscall, no lock, never waits; a
+ * full ring drops and counts). The main thread pushes parameter changes
+ * (every `param set`, and the whole set loaded at each attach), a GAP event
+ * at each attach (controller_restart, or recovery after a stall servod
+ * reported) and servod's own log lines; the trace thread (normal priority)
+ * forwards the firmware's remoteproc trace lines as LOG "rpu_app".
  */
 #define _GNU_SOURCE
 #include <dirent.h>
@@ -54,6 +64,7 @@
 #include "amp/amp.h"
 #include "servoamp/servo_proto.h"
 #include "servod.h"
+#include "telem.h"
 
 #define TTC_CLK_CTRL1 0x04u	/* counter 1 clock control (prescaler) */
 #define TTC_CNT_VAL1  0x1cu	/* counter 1 value */
@@ -72,7 +83,27 @@ static struct {
 	uint32_t ttc_hz;
 	int prio;
 	int verbose;
-} opt = { SERVOD_SOCKET, SERVOD_PARAMS, 2000.0, 0.5, 133000000u, 80, 0 };
+	uint32_t servo_clock_hz;	/* rate of the feedback's t_cycle / irq_latency ticks */
+	const char *telem;		/* ADDR:PORT or "off" */
+	const char *id;			/* controller id in the telemetry HELLO */
+} opt = { SERVOD_SOCKET, SERVOD_PARAMS, 2000.0, 0.5, 133000000u, 80, 0, 100000000u, "0.0.0.0:7700",
+	  "zynq7000_qemu" };
+
+/* Telemetry (static: the struct is 64-byte aligned). */
+static struct telem telem;
+static int telem_on;
+static char telem_addr[64];
+static uint16_t telem_port_opt = TELEM_DEFAULT_PORT;
+static _Thread_local int in_cycle_thread;	/* logm() never pushes from the cycle thread */
+
+/* Counters published for readers that must not take amp_lock (the
+ * telemetry drain thread's STATS): relaxed 64-bit atomics, lock-free on
+ * ARMv7-A (LDREXD/STREXD) as on x86-64. */
+static struct {
+	_Atomic uint64_t wakes, cycles, exchanges, absent, missed_irq, late, stalls;
+	_Atomic uint64_t stall_cycle;	/* servod cycle at which the last stall was detected */
+	_Atomic uint64_t recoveries, restores;
+} pub;
 
 /* The authoritative parameter set (words, as on the wire). */
 static uint32_t pset[SP_P_COUNT];
@@ -124,17 +155,37 @@ static volatile sig_atomic_t quit;
 static uint32_t period_ns = 1000000u;
 static uint32_t motion_axes = 4;
 
+static void vlogl(uint32_t level, const char *fmt, va_list ap)
+{
+	struct timespec ts;
+	char line[TELEM_LOG_MAX];
+	int n;
+
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	n = vsnprintf(line, sizeof(line), fmt, ap);
+	fprintf(stderr, "servod[%ld.%03ld]: %s\n", (long)ts.tv_sec, ts.tv_nsec / 1000000, line);
+	/* never from the cycle thread: the event queue takes a mutex */
+	if (telem_on && !in_cycle_thread && n > 0)
+		telem_push_log(&telem, 0, level, "servod", line,
+			       (size_t)n < sizeof(line) ? (size_t)n : sizeof(line) - 1);
+}
+
 static void logm(const char *fmt, ...)
 {
 	va_list ap;
-	struct timespec ts;
 
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	fprintf(stderr, "servod[%ld.%03ld]: ", (long)ts.tv_sec, ts.tv_nsec / 1000000);
 	va_start(ap, fmt);
-	vfprintf(stderr, fmt, ap);
+	vlogl(TELEM_LOG_INFO, fmt, ap);
 	va_end(ap);
-	fputc('\n', stderr);
+}
+
+static void logw(const char *fmt, ...)
+{
+	va_list ap;
+
+	va_start(ap, fmt);
+	vlogl(TELEM_LOG_WARNING, fmt, ap);
+	va_end(ap);
 }
 
 static uint64_t now_ns(void)
@@ -461,6 +512,7 @@ static void *cycle_thread(void *arg)
 	int have_count = 0;
 
 	(void)arg;
+	in_cycle_thread = 1;
 	memset(cmd, 0, sizeof(cmd));
 	while (!quit) {
 		struct pollfd pfd = { uio_cycle_fd, POLLIN, 0 };
@@ -530,9 +582,32 @@ static void *cycle_thread(void *arg)
 				cmd[i].torque_offset = 0;
 			}
 			/* 2-5: semaphore, feedback, commands, semaphore */
+			memset(&rx, 0, sizeof(rx));
 			rc = amp_linux_cycle(&amp, cmd, n, SP_CMDF_MOTION, &rx);
 			t_done = now_ns();
 			st.cycles++;
+			if (telem_on) {
+				/* one record per cycle into the lock-free ring: no
+				 * syscall, no lock, never waits (full: dropped and
+				 * counted by the library, announced as a GAP) */
+				struct telem_cycle tr;
+
+				tr.cycle = st.cycles;
+				tr.t_ns = t_wake;
+				tr.servo_cycle = amp.fb.cycle;
+				tr.t_cycle = amp.fb.t_cycle;
+				tr.irq_latency = amp.fb.irq_latency;
+				tr.wake_latency_ns = lat;
+				/* AMP_RX_* and TELEM_X_* have the same values */
+				tr.exchange = (rc == AMP_OK || rc == AMP_E_PEER_ERROR) ? rx.status : TELEM_X_NONE;
+				tr.missed = rx.missed;
+				tr.servo_status = amp.fb.status;
+				tr.result = rc;
+				tr.n_axes = n;
+				memcpy(tr.cmd, cmd, n * sizeof(cmd[0]));
+				memcpy(tr.fb, amp.fb.axis, n * sizeof(tr.fb[0]));
+				telem_push_cycle(&telem, &tr);
+			}
 			{
 				uint32_t hb = ocm_rd(&amp.ocm->servo_line.heartbeat);
 
@@ -561,6 +636,7 @@ static void *cycle_thread(void *arg)
 					st.stalls++;
 					st.stall_cycles = (uint32_t)(st.cycles - last_servo_hb_cycle);
 					st.stall_us = (uint32_t)((t_wake - last_servo_hb_t) / 1000u);
+					atomic_store_explicit(&pub.stall_cycle, st.cycles, memory_order_relaxed);
 					atomic_store(&stall_pending, 1);
 				}
 			} else if (rc == AMP_OK || rc == AMP_E_PEER_ERROR) {
@@ -570,6 +646,13 @@ static void *cycle_thread(void *arg)
 				st.servo_cmd_seq = amp.fb.cmd_seq;
 			}
 		}
+		atomic_store_explicit(&pub.wakes, st.wakes, memory_order_relaxed);
+		atomic_store_explicit(&pub.cycles, st.cycles, memory_order_relaxed);
+		atomic_store_explicit(&pub.exchanges, st.exchanges, memory_order_relaxed);
+		atomic_store_explicit(&pub.absent, st.absent, memory_order_relaxed);
+		atomic_store_explicit(&pub.missed_irq, st.missed_irq, memory_order_relaxed);
+		atomic_store_explicit(&pub.late, st.late, memory_order_relaxed);
+		atomic_store_explicit(&pub.stalls, st.stalls, memory_order_relaxed);
 		pthread_mutex_unlock(&amp_lock);
 	}
 	return 0;
@@ -693,6 +776,128 @@ static void apply_local(uint32_t id, uint32_t w)
 	pthread_mutex_unlock(&amp_lock);
 }
 
+/* ---- telemetry (never called from the cycle thread) ---------------------- */
+
+static double param_double(const struct sp_param_desc *d, uint32_t w)
+{
+	switch (d->type) {
+	case SP_T_F32: return (double)f_of(w);
+	case SP_T_I32: return (double)(int32_t)w;
+	default: return (double)w;
+	}
+}
+
+/* A parameter change on /servoamp/param (servo_proto's types are telem's). */
+static void telem_param(uint32_t id, uint32_t w)
+{
+	const struct sp_param_desc *d = &params[id];
+
+	if (telem_on)
+		telem_push_param(&telem, 0, id, d->name, d->type, param_double(d, w), d->unit);
+}
+
+/* STATS application counters, on the drain thread: published copies only. */
+static unsigned telem_counters(void *arg, struct telem_counter *out, unsigned max)
+{
+	static const struct {
+		const char *name;
+		_Atomic uint64_t *v;
+	} c[] = {
+		{ "servod.wakes", &pub.wakes },		{ "servod.cycles", &pub.cycles },
+		{ "servod.exchanges", &pub.exchanges },	{ "servod.absent", &pub.absent },
+		{ "servod.missed_irq", &pub.missed_irq }, { "servod.late", &pub.late },
+		{ "servod.stalls", &pub.stalls },	{ "servod.recoveries", &pub.recoveries },
+		{ "servod.restores", &pub.restores },
+	};
+	unsigned n = 0;
+
+	(void)arg;
+	for (; n < max && n < sizeof(c) / sizeof(c[0]); n++) {
+		snprintf(out[n].name, sizeof(out[n].name), "%s", c[n].name);
+		out[n].value = atomic_load_explicit(c[n].v, memory_order_relaxed);
+	}
+	return n;
+}
+
+static uint32_t trace_level(const char *s, size_t n)
+{
+	if ((n >= 8 && !strncmp(s, "warning:", 8)) || memmem(s, n, "WARN", 4))
+		return TELEM_LOG_WARNING;
+	if (memmem(s, n, "FAULT", 5) || memmem(s, n, "fault:", 6) || memmem(s, n, "error", 5) ||
+	    memmem(s, n, "CRASH", 5) || memmem(s, n, "crash", 5))
+		return TELEM_LOG_ERROR;
+	return TELEM_LOG_INFO;
+}
+
+/* The firmware's trace buffer (remoteproc debugfs trace0) -> LOG "rpu_app".
+ * The buffer is circular and debugfs shows it up to its NUL (the firmware's
+ * write position): new text is what lies beyond the part already sent.
+ * When the part already sent is no longer there as it was (shorter, or
+ * other bytes), the firmware wrapped or restarted (its log_init clears the
+ * buffer): read it from the start again. Only whole lines are sent. Normal
+ * priority, every 200 ms. */
+static void *trace_thread(void *arg)
+{
+	static char buf[64 * 1024], prev[64 * 1024];
+	char path[600] = "";
+	size_t off = 0;
+
+	(void)arg;
+	while (!quit) {
+		struct timespec ts = { 0, 200 * 1000000L };
+		int fd;
+		ssize_t len = 0, r;
+
+		nanosleep(&ts, 0);
+		if (!path[0]) {
+			DIR *d = opendir("/sys/class/remoteproc");
+			struct dirent *e;
+			char npath[600], name[64];
+
+			while (d && (e = readdir(d))) {
+				if (strncmp(e->d_name, "remoteproc", 10))
+					continue;
+				snprintf(npath, sizeof(npath), "/sys/class/remoteproc/%s/name", e->d_name);
+				if (!read_file(npath, name, sizeof(name)) && !strcmp(name, "servo-cpu1")) {
+					snprintf(path, sizeof(path), "/sys/kernel/debug/remoteproc/%s/trace0",
+						 e->d_name);
+					break;
+				}
+			}
+			if (d)
+				closedir(d);
+			if (!path[0])
+				continue;
+		}
+		fd = open(path, O_RDONLY | O_CLOEXEC);
+		if (fd < 0) {
+			off = 0;	/* firmware stopped: its next run starts a new trace */
+			continue;
+		}
+		while (len < (ssize_t)sizeof(buf) - 1 &&
+		       (r = read(fd, buf + len, sizeof(buf) - 1 - (size_t)len)) > 0)
+			len += r;
+		close(fd);
+		if (len > 0 && buf[len - 1] == 0)
+			len = (ssize_t)strnlen(buf, (size_t)len);
+		if ((size_t)len < off || memcmp(buf, prev, off))
+			off = 0;	/* wrapped or restarted */
+		while (off < (size_t)len) {
+			char *s = buf + off, *nl = memchr(s, '\n', (size_t)len - off);
+			size_t n;
+
+			if (!nl)
+				break;	/* a line still being written */
+			n = (size_t)(nl - s);
+			if (n && telem_push_log(&telem, 0, trace_level(s, n), "rpu_app", s, n))
+				break;	/* event queue full: retry these lines next time */
+			off += n + 1;
+		}
+		memcpy(prev, buf, off);
+	}
+	return 0;
+}
+
 /* ---- requests from ampctl ---------------------------------------------- */
 
 struct out {
@@ -779,6 +984,7 @@ static int req_stats(struct out *o, char *msg, size_t n)
 	struct sp_status s;
 	__typeof__(st) c;
 	struct amp_stats as;
+	struct telem_stats ts;
 	uint32_t lcycle;
 	int rc;
 
@@ -786,6 +992,8 @@ static int req_stats(struct out *o, char *msg, size_t n)
 	c = st;
 	as = amp.st;
 	lcycle = amp.cycle;
+	if (telem_on)	/* pushes happen under amp_lock: consistent with st */
+		telem_get_stats(&telem, &ts);
 	pthread_mutex_unlock(&amp_lock);
 	put(o, "linux.wakes=%llu\n", (unsigned long long)c.wakes);
 	put(o, "linux.cycles=%llu\n", (unsigned long long)c.cycles);
@@ -812,6 +1020,19 @@ static int req_stats(struct out *o, char *msg, size_t n)
 			put(o, "linux.wake_lat_hist.lt_%uus=%llu\n", hist_edges_us[b], (unsigned long long)c.hist[b]);
 		else
 			put(o, "linux.wake_lat_hist.ge_%uus=%llu\n", hist_edges_us[b - 1], (unsigned long long)c.hist[b]);
+	}
+	put(o, "telem.enabled=%d\n", telem_on);
+	if (telem_on) {
+		put(o, "telem.port=%u\ntelem.pushed=%llu\ntelem.dropped=%llu\ntelem.drained=%llu\n",
+		    telem_port(&telem), (unsigned long long)ts.pushed, (unsigned long long)ts.dropped,
+		    (unsigned long long)ts.drained);
+		put(o, "telem.events=%llu\ntelem.events_dropped=%llu\ntelem.client_lost=%llu\n",
+		    (unsigned long long)ts.events, (unsigned long long)ts.events_dropped,
+		    (unsigned long long)ts.client_lost);
+		put(o, "telem.clients=%u\ntelem.clients_total=%llu\ntelem.bytes_sent=%llu\n"
+		       "telem.ring_high_water=%u\n",
+		    ts.clients, (unsigned long long)ts.clients_total, (unsigned long long)ts.bytes_sent,
+		    ts.ring_high_water);
 	}
 	rc = servo_status(&s, msg, n);
 	if (rc) {
@@ -905,6 +1126,7 @@ static int req_param(struct out *o, int argc, char **argv, char *msg, size_t n)
 		}
 	}
 	apply_local((uint32_t)id, resp[1]);
+	telem_param((uint32_t)id, resp[1]);
 	fmt_value(&params[id], resp[1], v, sizeof(v));
 	put(o, "%s=%s%s%s\n", params[id].name, v, *params[id].unit ? " " : "", params[id].unit);
 	return SE_OK;
@@ -1064,13 +1286,14 @@ static void supervise(void)
 		char path[600];
 
 		snprintf(path, sizeof(path), "%s/device/report_crash", rproc_dir);
-		logm("servo stalled (heartbeat still for %u cycles): reporting a crash to remoteproc",
+		logw("servo stalled (heartbeat still for %u cycles): reporting a crash to remoteproc",
 		     pset[SP_P_wd_limit]);
 		if (write_file(path, "watchdog"))
 			logm("%s: %s", path, strerror(errno));
 		else {
 			recovering = 1;
 			recoveries++;
+			atomic_store_explicit(&pub.recoveries, recoveries, memory_order_relaxed);
 			clock_gettime(CLOCK_MONOTONIC, &recover_t0);
 		}
 	}
@@ -1082,8 +1305,28 @@ static void supervise(void)
 		int rc = restore_params(msg, sizeof(msg));
 
 		if (rc == SE_OK) {
+			uint64_t c = atomic_load_explicit(&pub.cycles, memory_order_relaxed);
+
 			restored_attach = ac;
 			restores++;
+			atomic_store_explicit(&pub.restores, restores, memory_order_relaxed);
+			if (telem_on) {
+				/* the attach as a GAP event (nothing lost: the cycles
+				 * in between are on record with their exchange
+				 * status): a recovery spans stall detection .. now */
+				if (recovering) {
+					uint64_t from = atomic_load_explicit(&pub.stall_cycle, memory_order_relaxed);
+
+					telem_push_gap(&telem, 0, from && from <= c ? from : c, c, 0,
+						       TELEM_GAP_RECOVERY);
+				} else {
+					telem_push_gap(&telem, 0, c, c, 0, TELEM_GAP_CONTROLLER_RESTART);
+				}
+				/* the set just loaded into the servo */
+				for (int i = 0; i < SP_P_COUNT; i++)
+					if (params[i].flags & SP_F_RESTORE)
+						telem_param((uint32_t)i, pset[i]);
+			}
 			if (recovering)
 				logm("recovery complete");
 			recovering = 0;
@@ -1093,6 +1336,71 @@ static void supervise(void)
 			logm("parameter restore failed: %s", msg);
 		}
 	}
+}
+
+/* "ADDR:PORT", "[V6ADDR]:PORT" or "off" -> telem_addr / telem_port_opt; 0 ok. */
+static int parse_telem_opt(const char *s)
+{
+	const char *colon;
+	char *end;
+	unsigned long port;
+	size_t alen;
+
+	if (!strcmp(s, "off"))
+		return 0;
+	colon = strrchr(s, ':');
+	if (!colon || colon == s)
+		return -1;
+	port = strtoul(colon + 1, &end, 10);
+	if (!colon[1] || *end || port > 65535)
+		return -1;
+	if (s[0] == '[') {
+		if (colon[-1] != ']')
+			return -1;
+		s++;
+		alen = (size_t)(colon - 1 - s);
+	} else {
+		alen = (size_t)(colon - s);
+	}
+	if (!alen || alen >= sizeof(telem_addr))
+		return -1;
+	memcpy(telem_addr, s, alen);
+	telem_addr[alen] = 0;
+	telem_port_opt = (uint16_t)port;
+	return 0;
+}
+
+static void telemetry_start(void)
+{
+	struct telem_cfg tc;
+	int rc;
+
+	if (!strcmp(opt.telem, "off")) {
+		logm("telemetry off");
+		return;
+	}
+	telem_cfg_defaults(&tc);
+	tc.listen_addr = telem_addr;
+	tc.port = telem_port_opt;
+	tc.controller_id = opt.id;
+	tc.n_axes = motion_axes;
+	tc.cycle_period_ns = period_ns;
+	tc.clock_hz = opt.servo_clock_hz;
+	tc.drain_interval_us = 10000u;	/* 100 wake-ups/s; the ring holds 4,096 cycles */
+	tc.mlock = 1;
+	tc.app_counters = telem_counters;
+	tc.app_arg = 0;
+	rc = telem_init(&telem, &tc);
+	if (rc == 0)
+		rc = telem_start(&telem);
+	if (rc) {
+		logw("telemetry off: %s:%u: %s", telem_addr, telem_port_opt, strerror(-rc));
+		telem_destroy(&telem);
+		return;
+	}
+	telem_on = 1;
+	logm("telemetry on %s:%u (%u axes, ring %u cycles)", telem_addr, telem_port(&telem), tc.n_axes,
+	     tc.ring_capacity);
 }
 
 static void on_signal(int sig)
@@ -1106,7 +1414,8 @@ int main(int argc, char **argv)
 	struct sched_param sp;
 	pthread_attr_t attr;
 	pthread_mutexattr_t ma;
-	pthread_t th;
+	pthread_t th, trace_th;
+	int have_trace = 0;
 	struct sockaddr_un sa = { .sun_family = AF_UNIX };
 	uint32_t size, offs;
 	int lfd, rc;
@@ -1122,15 +1431,26 @@ int main(int argc, char **argv)
 			opt.freq = atof(argv[++i]);
 		else if (!strcmp(argv[i], "--ttc-hz") && i + 1 < argc)
 			opt.ttc_hz = (uint32_t)strtoul(argv[++i], 0, 0);
+		else if (!strcmp(argv[i], "--servo-clock-hz") && i + 1 < argc)
+			opt.servo_clock_hz = (uint32_t)strtoul(argv[++i], 0, 0);
 		else if (!strcmp(argv[i], "--prio") && i + 1 < argc)
 			opt.prio = atoi(argv[++i]);
+		else if (!strcmp(argv[i], "--telemetry") && i + 1 < argc)
+			opt.telem = argv[++i];
+		else if (!strcmp(argv[i], "--id") && i + 1 < argc)
+			opt.id = argv[++i];
 		else if (!strcmp(argv[i], "-v"))
 			opt.verbose = 1;
 		else {
 			fprintf(stderr, "usage: servod [-s SOCKET] [-p PARAMFILE] [-a AMPLITUDE_INC] [-f FREQ_HZ] "
-					"[--ttc-hz HZ] [--prio N] [-v]\n");
+					"[--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N] "
+					"[--telemetry ADDR:PORT|off] [--id NAME] [-v]\n");
 			return 1;
 		}
+	}
+	if (parse_telem_opt(opt.telem)) {
+		fprintf(stderr, "servod: --telemetry wants ADDR:PORT, [ADDR6]:PORT or off, not '%s'\n", opt.telem);
+		return 1;
 	}
 	setvbuf(stderr, 0, _IOLBF, 0);
 	params_load();
@@ -1163,6 +1483,7 @@ int main(int argc, char **argv)
 	signal(SIGPIPE, SIG_IGN);
 	if (mlockall(MCL_CURRENT | MCL_FUTURE))
 		logm("mlockall: %s", strerror(errno));
+	telemetry_start();
 
 	pthread_attr_init(&attr);
 	pthread_attr_setinheritsched(&attr, PTHREAD_EXPLICIT_SCHED);
@@ -1186,6 +1507,12 @@ int main(int argc, char **argv)
 		logm("socket %s: %s", opt.sock_path, strerror(errno));
 		return 1;
 	}
+	if (telem_on) {
+		rc = pthread_create(&trace_th, 0, trace_thread, 0);
+		if (rc)
+			logw("firmware trace thread: %s", strerror(rc));
+		have_trace = !rc;
+	}
 	logm("running: cycle thread SCHED_FIFO %d, socket %s, parameters %s, period %u us, %u axes",
 	     opt.prio, opt.sock_path, opt.param_path, pset[SP_P_cycle_period_us], pset[SP_P_axes]);
 
@@ -1203,10 +1530,19 @@ int main(int argc, char **argv)
 		}
 	}
 	logm("exiting: closing the link (the servo brings its axes to a safe stop)");
+	pthread_join(th, 0);	/* the cycle thread sees quit within 100 ms */
 	pthread_mutex_lock(&amp_lock);
 	if (session)
 		amp_linux_close(&amp);
 	pthread_mutex_unlock(&amp_lock);
 	unlink(opt.sock_path);
+	if (have_trace)
+		pthread_join(trace_th, 0);
+	if (telem_on) {
+		/* after the cycle thread: drains the ring, final STATS, closes */
+		telem_stop(&telem);
+		telem_on = 0;
+		telem_destroy(&telem);
+	}
 	return 0;
 }

@@ -16,6 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/random.h>
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
@@ -180,16 +181,18 @@ void telem_cfg_defaults(struct telem_cfg *cfg)
 	cfg->linger_ms = 1000u;
 }
 
+/* The session id needs uniqueness, not secrecy: never wait for the kernel's
+ * entropy. (Early after boot, a read of /dev/urandom on Linux >= 5.18 first
+ * runs the jitter entropy generator: 2.6 s under QEMU TCG, which delayed
+ * servod's start on the emulated board.) */
 static uint64_t random_id(void)
 {
 	uint64_t v = 0;
-	int fd = open("/dev/urandom", O_RDONLY | O_CLOEXEC);
-
-	if (fd >= 0) {
-		if (read(fd, &v, sizeof(v)) != (ssize_t)sizeof(v))
+#ifdef GRND_INSECURE
+	if (getrandom(&v, sizeof(v), GRND_INSECURE) != (ssize_t)sizeof(v))
+#endif
+		if (getrandom(&v, sizeof(v), GRND_NONBLOCK) != (ssize_t)sizeof(v))
 			v = 0;
-		close(fd);
-	}
 	if (!v)
 		v = realtime_ns() ^ ((uint64_t)getpid() << 32);
 	return v ? v : 1u;

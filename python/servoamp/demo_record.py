@@ -1,0 +1,92 @@
+"""The demo's last step: record the emulated controller into MCAP.
+
+    python -m servoamp.demo_record [--seconds N] [--out build/demo] [--keep-logs]
+
+Boots the emulated board with networking (gem0 on QEMU user networking,
+host 127.0.0.1:PORT -> guest 7700, see servoamp.netboard), starts servod and
+the firmware, records N seconds (default 5) of every cycle while changing a
+parameter and hanging the firmware on purpose (servod detects it, remoteproc
+recovers it), then writes build/demo/run.mcap, the plots in
+build/demo/plots/, prints ``servoamp info`` and where the files are.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from pathlib import Path
+
+from servoamp import info, netboard, plot, qemu
+from servoamp.record import RecordResult, record
+
+
+def _say(msg: str) -> None:
+    print(f"[demo-record] {msg}", flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m servoamp.demo_record", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=5.0, help="recording length (default 5)")
+    ap.add_argument("--out", type=Path, default=qemu.REPO / "build" / "demo",
+                    help="output folder (default build/demo)")
+    ap.add_argument("--port", type=int, default=0, help="host port (default: a free one)")
+    ap.add_argument("--keep-logs", action="store_true", help="keep the UART logs")
+    ap.add_argument("--no-fault", action="store_true", help="no firmware hang during the recording")
+    args = ap.parse_args(argv)
+
+    t0 = time.monotonic()
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    mcap = out / "run.mcap"
+    board = qemu.Board.load("zynq7000_qemu")
+    images = qemu.prepare_images(board)
+    _say(f"images ready ({time.monotonic() - t0:.1f} s)")
+    cb = netboard.ControllerBoard(board, images, host_port=args.port or None,
+                                  keep_logs=args.keep_logs)
+    with cb:
+        _say(f"booted with gem0 on QEMU user networking: 127.0.0.1:{cb.host_port} -> "
+             f"guest {netboard.GUEST_ADDR.split('/')[0]}:{netboard.TELEMETRY_PORT} "
+             f"({time.monotonic() - t0:.1f} s)")
+        cb.start_servod()
+        cb.start_firmware()
+        hello = cb.wait_telemetry()
+        _say(f"servod telemetry: controller {hello.controller_id}, {hello.n_axes} axes, "
+             f"period {hello.cycle_period_ns / 1e3:.0f} us")
+        # a 10-cycle watchdog trips on TCG hiccups: 50 cycles, and leave SAFESTOP
+        cb.ampctl("param set wd_limit 50")
+        cb.ampctl("resume", expected_rc=None)
+
+        box: dict[str, RecordResult] = {}
+        th = threading.Thread(target=lambda: box.update(
+            r=record("127.0.0.1", cb.host_port, mcap, args.seconds)))
+        _say(f"recording {args.seconds:g} s into {mcap}")
+        th.start()
+        time.sleep(min(1.5, args.seconds / 3))
+        _say("ampctl " + cb.ampctl("param set pos_kp 70").strip())
+        if not args.no_fault:
+            time.sleep(min(1.0, args.seconds / 4))
+            cb.ampctl("debug hang")
+            cb.wait_servod_log("recovery complete")
+            _say("firmware hung on purpose: servod detected it, remoteproc recovered it")
+        th.join()
+        res = box["r"]
+        stats = cb.stats()
+    _say(f"recorded {res.cycles} cycles, {res.messages} messages, {len(res.gaps)} gap(s); "
+         f"servod: cycles {stats.get('linux.cycles')}, telemetry pushed "
+         f"{stats.get('telem.pushed')}, dropped {stats.get('telem.dropped')}, "
+         f"client_lost {stats.get('telem.client_lost')}")
+    files = plot.plot(mcap, out / "plots")
+    print(info.format_text(info.summarize(mcap)), flush=True)
+    _say(f"recording: {mcap} ({mcap.stat().st_size // 1024} KiB; open it in Foxglove with "
+         f"tools/foxglove/servoamp-layout.json)")
+    for f in files:
+        _say(f"plot: {f}")
+    _say(f"done in {time.monotonic() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,170 @@
+"""The emulated controller with guest networking, for recording its telemetry.
+
+QEMU user networking gives the board's gem0 (Cadence GEM, eth0 in the guest,
+10.0.2.15/24) a host port forward bound to 127.0.0.1 only, to servod's
+telemetry port (7700):
+
+    -nic user,model=cadence_gem,hostfwd=tcp:127.0.0.1:HOSTPORT-:7700
+
+:class:`ControllerBoard` boots the board with that NIC (through
+``QemuMachine(extra_args=...)``), brings eth0 up (``servoamp-net`` in the
+initramfs), starts servod and the servo firmware, and runs shell commands
+and ``ampctl`` on the console::
+
+    with ControllerBoard() as cb:
+        cb.start_servod()
+        cb.start_firmware()
+        res = servoamp.record.record("127.0.0.1", cb.host_port, "run.mcap", 5.0)
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+from servoamp import qemu
+from servoamp import telemetry as tw
+
+TELEMETRY_PORT = 7700
+GUEST_ADDR = "10.0.2.15/24"
+SERVOD_LOG = "/tmp/servod.log"
+RPROC = "/sys/class/remoteproc/remoteproc0"
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free now (QEMU binds it right after)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def nic_args(host_port: int, guest_port: int = TELEMETRY_PORT) -> list[str]:
+    """QEMU arguments: gem0 on user networking, host 127.0.0.1:host_port
+    forwarded to the guest's guest_port."""
+    return ["-nic", f"user,model=cadence_gem,hostfwd=tcp:127.0.0.1:{host_port}-:{guest_port}"]
+
+
+def _log(msg: str) -> None:
+    print(f"[netboard] {msg}", flush=True)
+
+
+class ControllerBoard:
+    """One boot of the emulated controller with networking."""
+
+    def __init__(self, board: qemu.Board | None = None, images: qemu.Images | None = None,
+                 host_port: int | None = None, accel: str | None = "tcg,thread=single",
+                 keep_logs: bool = False, extra_args: Sequence[str] = ()) -> None:
+        self.board = board or qemu.Board.load("zynq7000_qemu")
+        self.images = images
+        self.host_port = host_port or free_port()
+        self.accel = accel
+        self.keep_logs = keep_logs
+        self.extra_args = list(extra_args)
+        self.machine: qemu.QemuMachine | None = None
+        self.boot_times: qemu.BootTimes | None = None
+        self.prompt = str(self.board.data["linux"]["prompt"])
+
+    # -- lifecycle -------------------------------------------------------------------
+    def start(self, timeout: float = 90.0) -> ControllerBoard:
+        if self.images is None:
+            self.images = qemu.prepare_images(self.board)
+        self.machine = qemu.QemuMachine(self.board, self.images, accel=self.accel,
+                                        keep_logs=self.keep_logs,
+                                        extra_args=nic_args(self.host_port) + self.extra_args)
+        self.machine.start()
+        try:
+            self.boot_times = qemu.boot_to_shell(self.machine, timeout=timeout)
+            out = self.sh("servoamp-net " + GUEST_ADDR, timeout=20)
+            if "carrier 1" not in out:
+                raise qemu.QemuError(f"guest network not up: {out}")
+        except BaseException:
+            self.machine.mark_failed()
+            self.stop()
+            raise
+        return self
+
+    def stop(self) -> None:
+        if self.machine is not None:
+            self.machine.stop()
+            self.machine = None
+
+    def mark_failed(self) -> None:
+        if self.machine is not None:
+            self.machine.mark_failed()
+
+    def __enter__(self) -> ControllerBoard:
+        return self.start() if self.machine is None else self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        if exc_type is not None:
+            self.mark_failed()
+        self.stop()
+
+    @property
+    def run_dir(self) -> Path | None:
+        return self.machine.run_dir if self.machine is not None else None
+
+    # -- shell -------------------------------------------------------------------------
+    def sh_rc(self, command: str, timeout: float = 20.0) -> tuple[int, str]:
+        if self.machine is None:
+            raise qemu.QemuError("the board is not running")
+        return qemu.run_shell(self.machine.uart(0), command, self.prompt, timeout=timeout)
+
+    def sh(self, command: str, timeout: float = 20.0, expected_rc: int | None = 0) -> str:
+        rc, out = self.sh_rc(command, timeout)
+        if expected_rc is not None and rc != expected_rc:
+            raise qemu.QemuError(f"'{command}' exited with {rc}, expected {expected_rc}:\n{out}")
+        return out
+
+    def wait_servod_log(self, text: str, count: int = 1, timeout: float = 30.0) -> None:
+        tries = int(timeout / 0.05)
+        out = self.sh(f'i=0; while [ "$(grep -c "{text}" {SERVOD_LOG})" -lt {count} ] && '
+                      f'[ $i -lt {tries} ]; do sleep 0.05; i=$((i+1)); done; '
+                      f'grep -c "{text}" {SERVOD_LOG}', timeout=timeout + 30, expected_rc=None)
+        n = int(out.strip().splitlines()[-1]) if out.strip() else 0
+        if n < count:
+            log = self.sh(f"cat {SERVOD_LOG}", expected_rc=None)
+            raise qemu.QemuError(f"servod log has {n} x {text!r}, expected {count}:\n{log}")
+
+    def ampctl(self, args: str, expected_rc: int | None = 0) -> str:
+        return self.sh(f"ampctl {args} 2>&1", expected_rc=expected_rc)
+
+    def stats(self) -> dict[str, str]:
+        out = self.ampctl("stats", expected_rc=None)
+        return {k: v for k, _, v in (ln.partition("=") for ln in out.splitlines()) if _}
+
+    # -- the controller ------------------------------------------------------------------
+    def start_servod(self, args: str = "") -> None:
+        """servod in the background, its log in /tmp/servod.log; waits until
+        it runs (and, with telemetry, listens)."""
+        self.sh(f"rm -f {SERVOD_LOG}; (servod {args} > {SERVOD_LOG} 2>&1 &)")
+        self.wait_servod_log("waiting for the servo")
+
+    def start_firmware(self, firmware: str = "rpu_app.elf") -> None:
+        self.sh(f"echo {firmware} > {RPROC}/firmware && echo start > {RPROC}/state")
+        self.wait_servod_log("parameter set loaded")
+
+    def wait_telemetry(self, timeout: float = 20.0) -> tw.Hello:
+        """Connect through the port forward until servod's HELLO arrives."""
+        deadline = time.monotonic() + timeout
+        last: Exception | None = None
+        while time.monotonic() < deadline:
+            try:
+                with socket.create_connection(("127.0.0.1", self.host_port), timeout=2.0) as s:
+                    s.settimeout(3.0)
+                    sp = tw.FrameSplitter()
+                    while True:
+                        data = s.recv(4096)
+                        if not data:
+                            break
+                        sp.feed(data)
+                        for typ, off, ln in sp.frames():
+                            if typ == tw.MSG_HELLO:
+                                return tw.decode_hello(bytes(sp.buf[off:off + ln]))
+            except OSError as e:
+                last = e
+            time.sleep(0.2)
+        raise qemu.QemuError(f"no telemetry HELLO at 127.0.0.1:{self.host_port} "
+                             f"within {timeout:g} s ({last})")

@@ -1,0 +1,291 @@
+"""Every cycle on record, from the emulated controller (one QEMU boot).
+
+The board boots with gem0 on QEMU user networking (host 127.0.0.1:PORT ->
+guest 7700, servoamp.netboard), servod streams its telemetry, the firmware
+runs the demo axes (sines). ``servoamp.record.record`` records a few seconds
+while a parameter is changed with ampctl and the firmware is hung on purpose
+(servod detects the stall, remoteproc recovers it). The file is checked
+against servod's own counters (``ampctl stats``), read back by the Python and
+the TypeScript (@mcap/core) readers, summarized by ``servoamp info`` and
+plotted. Then one recorder is stopped with SIGINT, and one sees servod stop
+(final STATS).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from recorder_helpers import node_verify, servoamp_cmd
+from servoamp import info, mcapio, netboard, plot, qemu
+from servoamp.record import RecordResult, record
+
+ENV = dict(os.environ, PYTHONUNBUFFERED="1")
+RECORD_S = 6.0
+AMP_E_STALLED = -9
+SAFESTOP = 0x53504F54
+RUNNING = 0x534E5552
+
+pytestmark = pytest.mark.board
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    tmp = tmp_path_factory.mktemp("board_rec")
+    board = qemu.Board.load("zynq7000_qemu")
+    images = qemu.prepare_images(board)
+    out: dict[str, Any] = {"path": tmp / "run.mcap", "tmp": tmp}
+    with netboard.ControllerBoard(board, images) as cb:
+        t_boot = time.monotonic()
+        cb.start_servod()
+        cb.start_firmware()
+        out["hello"] = cb.wait_telemetry()
+        # as tests/robot/04_cycle.robot: a 10-cycle watchdog trips on TCG
+        # hiccups (the servo then holds its axes in SAFESTOP): 50, resume
+        cb.ampctl("param set wd_limit 50")
+        cb.ampctl("resume", expected_rc=None)
+        out["stats_before"] = cb.stats()
+
+        box: dict[str, RecordResult] = {}
+        th = threading.Thread(target=lambda: box.update(
+            r=record("127.0.0.1", cb.host_port, out["path"], RECORD_S)))
+        t0 = time.monotonic()
+        th.start()
+        time.sleep(1.5)
+        out["param_out"] = cb.ampctl("param set pos_kp 70")
+        time.sleep(1.0)
+        cb.ampctl("debug hang")
+        cb.wait_servod_log("recovery complete")
+        out["recovered_after_s"] = time.monotonic() - t0
+        th.join(timeout=RECORD_S + 30)
+        assert not th.is_alive()
+        out["res"] = box["r"]
+        out["stats_after"] = cb.stats()
+        out["servod_log"] = cb.sh(f"cat {netboard.SERVOD_LOG}")
+
+        # servoamp record stopped with SIGINT
+        sig_path = tmp / "sigint.mcap"
+        p = subprocess.Popen(servoamp_cmd("record", "--connect", f"127.0.0.1:{cb.host_port}",
+                                          "-o", str(sig_path), "--json"),
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+        time.sleep(3.0)
+        p.send_signal(signal.SIGINT)
+        so, se = p.communicate(timeout=30)
+        out["sigint"] = {"rc": p.returncode, "out": so, "err": se, "path": sig_path}
+
+        # servod stops while a recorder is connected: drain, final STATS, EOF
+        box2: dict[str, RecordResult] = {}
+        th = threading.Thread(target=lambda: box2.update(
+            r=record("127.0.0.1", cb.host_port, tmp / "stop.mcap", 30.0, reconnect=False)))
+        th.start()
+        time.sleep(1.5)
+        cb.sh("kill -TERM $(pidof servod); i=0; while pidof servod >/dev/null && [ $i -lt 100 ];"
+              " do sleep 0.05; i=$((i+1)); done; ! pidof servod")
+        th.join(timeout=30)
+        out["stop_res"] = box2["r"]
+        out["servod_log_end"] = cb.sh(f"tail -n 3 {netboard.SERVOD_LOG}")
+        out["board_s"] = time.monotonic() - t_boot
+    return out
+
+
+def _cycles(path: Path) -> list[tuple[int, dict[str, Any]]]:
+    return [(t, m) for _tp, t, m in mcapio.iter_json(path, [mcapio.T_CYCLE])]
+
+
+def test_every_cycle_on_record(run: dict[str, Any]) -> None:
+    res: RecordResult = run["res"]
+    a, b = run["stats_before"], run["stats_after"]
+    print(f"\nrecorded {res.cycles} cycles, {res.messages} messages in {res.wall_s:.1f} s "
+          f"(recorder CPU {res.cpu_s:.2f} s = {res.cycles / max(res.cpu_s, 1e-9):.0f} cycles/CPU s); "
+          f"servod: telem.dropped {b['telem.dropped']}, client_lost {b['telem.client_lost']}, "
+          f"missed_irq {int(b['linux.missed_irq']) - int(a['linux.missed_irq'])}")
+    assert res.stopped_by == "duration" and res.connections == 1
+    assert res.first_cycle is not None and res.last_cycle is not None
+    # servod's cycle counter is the record's cycle number: the recorder
+    # window holds last - first + 1 of servod's cycles; each is on record
+    # or inside an announced overflow gap
+    cyc = [m["cycle"] for _t, m in _cycles(run["path"])]
+    assert cyc == sorted(set(cyc)) and len(cyc) == res.cycles
+    assert cyc[0] == res.first_cycle and cyc[-1] == res.last_cycle
+    lost = {c for g in res.gaps if g["reason"] in ("ring_overflow", "client_overflow")
+            for c in range(g["from_cycle"], g["to_cycle"] + 1)}
+    missing = set(range(cyc[0], cyc[-1] + 1)) - set(cyc)
+    assert missing == lost, f"missing {len(missing)}, announced {len(lost)}"
+    assert res.cycles == res.last_cycle - res.first_cycle + 1 - len(lost)
+    assert not [g for g in res.gaps if g["source"] == "recorder"]
+    # servod's counters at the end
+    assert int(a["linux.cycles"]) < res.first_cycle <= res.last_cycle <= int(b["linux.cycles"])
+    assert int(b["telem.pushed"]) == int(b["linux.cycles"])  # every cycle of the session pushed
+    assert int(b["telem.dropped"]) == sum(g["lost"] for g in res.gaps
+                                          if g["reason"] == "ring_overflow")
+    assert int(b["telem.events_dropped"]) == 0
+    # the recorder's last STATS agrees with ampctl stats
+    st = res.last_stats
+    assert st is not None and st["dropped"] == int(b["telem.dropped"])
+    assert st["counters"]["servod.cycles"] == st["pushed"] <= int(b["linux.cycles"])
+    assert st["counters"]["servod.recoveries"] == int(b["linux.recoveries"])
+    # controller timestamps increase; a time step of k periods is k-1 missed interrupts
+    ts = [t for t, _m in _cycles(run["path"])]
+    assert all(t1 > t0 for t0, t1 in zip(ts, ts[1:]))
+
+
+def test_recovery_is_a_marked_gap(run: dict[str, Any]) -> None:
+    res: RecordResult = run["res"]
+    a, b = run["stats_before"], run["stats_after"]
+    assert int(b["linux.stalls"]) - int(a["linux.stalls"]) == 1
+    assert int(b["linux.recoveries"]) - int(a["linux.recoveries"]) == 1
+    rec = [g for g in res.gaps if g["reason"] == "recovery"]
+    assert len(rec) == 1, res.gaps
+    g = rec[0]
+    assert g["source"] == "controller" and g["lost"] == 0
+    assert res.first_cycle < g["from_cycle"] < g["to_cycle"] < res.last_cycle
+    # inside: the stall as servod saw it (AMP_E_STALLED, no exchange); outside: exchanges
+    inside = [m for _t, m in _cycles(run["path"]) if g["from_cycle"] <= m["cycle"] <= g["to_cycle"]]
+    assert len(inside) == g["to_cycle"] - g["from_cycle"] + 1
+    assert any(m["result"] == AMP_E_STALLED and m["exchange"] == "none" for m in inside)
+    assert inside[0]["result"] == AMP_E_STALLED
+    assert not [x for x in res.gaps if x["reason"] == "controller_restart"]
+
+
+def test_parameter_changes_recorded(run: dict[str, Any]) -> None:
+    assert "pos_kp=70" in run["param_out"]
+    res: RecordResult = run["res"]
+    params = [(t, m) for _tp, t, m in mcapio.iter_json(run["path"], [mcapio.T_PARAM])]
+    kp = [m for _t, m in params if m["name"] == "pos_kp"]
+    # the ampctl change, then the whole set loaded at the re-attach after the recovery
+    assert [m["value"] for m in kp] == [70.0, 70.0], kp
+    assert (kp[0]["id"], kp[0]["type"], kp[0]["unit"]) == (3, "f32", "1/s")
+    assert res.first_cycle <= kp[0]["cycle"] <= res.last_cycle
+    g = next(x for x in res.gaps if x["reason"] == "recovery")
+    # (a PARAM carries the last cycle pushed when it was queued: the same
+    # or a few cycles after the GAP's end)
+    reload = [m for _t, m in params if g["to_cycle"] <= m["cycle"] <= g["to_cycle"] + 100]
+    assert {m["name"] for m in reload} >= {"pos_kp", "wd_limit", "axes", "cycle_period_us"}
+    assert next(m["value"] for m in reload if m["name"] == "wd_limit") == 50.0
+
+
+def test_firmware_log_as_foxglove_log(run: dict[str, Any]) -> None:
+    schemas = mcapio.read_schemas(run["path"])
+    assert schemas[mcapio.T_LOG][0] == "foxglove.Log"
+    logs = [m for _tp, _t, m in mcapio.iter_json(run["path"], [mcapio.T_LOG])]
+    fw = [m["message"] for m in logs if m["name"] == "rpu_app"]
+    sd = [m for m in logs if m["name"] == "servod"]
+    assert sum(1 for x in fw if x.startswith("stats cycle=")) >= 3  # once per 1000 cycles
+    # the restarted firmware's banner, once (no line sent twice)
+    assert sum(1 for x in fw if x.startswith("servoamp rpu_app ")) == 1, fw
+    assert any("attach_count 2" in x for x in fw)
+    # within one firmware run no line twice (two runs may print the same stats line)
+    k = next(i for i, x in enumerate(fw) if x.startswith("servoamp rpu_app "))
+    for part in (fw[:k], fw[k:]):
+        assert len(part) == len(set(part)), [x for x in part if part.count(x) > 1]
+    assert any(m["level"] == 3 and "stalled" in m["message"] for m in sd)
+    assert any("recovery complete" in m["message"] for m in sd)
+
+
+def test_read_back_python_and_typescript(run: dict[str, Any], node_ready: None) -> None:
+    path = run["path"]
+    py: dict[str, int] = {}
+    for topic, _t, _d in mcapio.iter_messages(path):
+        py[topic] = py.get(topic, 0) + 1
+    res: RecordResult = run["res"]
+    assert py[mcapio.T_CYCLE] == res.cycles and py[mcapio.T_PATH] == res.cycles
+    assert all(py[mcapio.axis_topic(i)] == res.cycles for i in range(run["hello"].n_axes))
+    for stream in (False, True):
+        js = node_verify(path, stream=stream)
+        assert js["error"] is None and js["complete"] is True
+        assert js["by_topic"] == py and js["json_errors"] == 0
+        assert js["cycles"]["count"] == res.cycles and js["cycles"]["non_increasing"] == 0
+        assert (js["cycles"]["first"], js["cycles"]["last"]) == (res.first_cycle, res.last_cycle)
+
+
+def test_info_reports_the_numbers(run: dict[str, Any]) -> None:
+    res: RecordResult = run["res"]
+    p = subprocess.run(servoamp_cmd("info", str(run["path"]), "--json"), capture_output=True,
+                       text=True, timeout=60, env=ENV)
+    assert p.returncode == 0, p.stderr
+    s = json.loads(p.stdout)
+    assert s["complete"] and s["controller_id"] == "zynq7000_qemu"
+    assert s["n_axes"] == 4 and s["cycle_period_ns"] == 1_000_000
+    assert s["cycles"] == res.cycles and (s["first_cycle"], s["last_cycle"]) == \
+        (res.first_cycle, res.last_cycle)
+    assert s["lost_cycles"] == sum(g["lost"] or 0 for g in res.gaps)
+    assert [g["reason"] for g in s["gaps"]] == [g["reason"] for g in res.gaps]
+    assert sum(s["exchange"].values()) == res.cycles and s["exchange"].get("none", 0) >= 1
+    assert s["log_lines"] >= 5
+    assert RECORD_S - 1.0 < s["duration_s"] < RECORD_S + 1.0
+    txt = subprocess.run(servoamp_cmd("info", str(run["path"])), capture_output=True, text=True,
+                         timeout=60, env=ENV).stdout
+    print("\n" + txt)
+    assert f"cycles:      {res.cycles}" in txt and "recovery (controller)" in txt
+    assert "pos_kp = 70" in txt
+
+
+def test_axes_follow_the_sines(run: dict[str, Any]) -> None:
+    """Outside the recovery (and 0.3 s of re-settling after it), every axis
+    follows its commanded sine: following error small against the 2000 inc
+    amplitude, actual position tracking the command."""
+    res: RecordResult = run["res"]
+    g = next(x for x in res.gaps if x["reason"] == "recovery")
+    cyc = {m["cycle"]: m for _t, m in _cycles(run["path"])}
+    for i in range(run["hello"].n_axes):
+        cmd, act, fe = [], [], []
+        for _t, m in ((t, m) for _tp, t, m in mcapio.iter_json(run["path"],
+                                                               [mcapio.axis_topic(i)])):
+            c = m["cycle"]
+            if g["from_cycle"] - 5 <= c <= g["to_cycle"] + 300 or cyc[c]["servo_status"] != RUNNING:
+                continue
+            cmd.append(m["command"]["target_pos"])
+            act.append(m["feedback"]["actual_pos"])
+            fe.append(m["feedback"]["following_error"])
+        assert len(cmd) > 3000, (i, len(cmd))
+        assert 1900 <= max(abs(x) for x in cmd) <= 2000
+        assert max(abs(x) for x in fe) <= 200, (i, max(abs(x) for x in fe))
+        mc, ma = sum(cmd) / len(cmd), sum(act) / len(act)
+        cov = sum((x - mc) * (y - ma) for x, y in zip(cmd, act))
+        var = math.sqrt(sum((x - mc) ** 2 for x in cmd) * sum((y - ma) ** 2 for y in act))
+        assert cov / var > 0.99, (i, cov / var)
+
+
+def test_plot_writes_the_pngs(run: dict[str, Any], tmp_path: Path) -> None:
+    files = plot.plot(run["path"], tmp_path / "plots")
+    names = {f.name for f in files}
+    assert names == {"xy_path.png", "following_error.png", "position.png",
+                     "latency_histogram.png"}
+    for f in files:
+        assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f.stat().st_size > 10_000
+
+
+def test_sigint_leaves_a_finalized_file(run: dict[str, Any], node_ready: None) -> None:
+    s = run["sigint"]
+    assert s["rc"] == 0, s["err"]
+    r = json.loads(s["out"])
+    assert r["stopped_by"] == "signal" and r["cycles"] > 1000
+    assert r["cycles"] == r["last_cycle"] - r["first_cycle"] + 1 - \
+        sum(g["lost"] or 0 for g in r["gaps"])
+    assert mcapio.has_footer(s["path"])
+    summ = info.summarize(s["path"])
+    assert summ["complete"] and summ["cycles"] == r["cycles"]
+    js = node_verify(s["path"])
+    assert js["complete"] and js["cycles"]["count"] == r["cycles"]
+
+
+def test_servod_stop_sends_the_final_stats(run: dict[str, Any]) -> None:
+    r: RecordResult = run["stop_res"]
+    assert "exiting" in run["servod_log_end"]
+    assert r.stopped_by == "eof" and r.cycles > 500
+    st = r.last_stats
+    assert st is not None and st["final"] is True
+    assert st["pushed"] == st["drained"] + st["dropped"]
+    # the cycle thread stopped before the drain: the last record is the last cycle
+    assert st["counters"]["servod.cycles"] == st["pushed"] == r.last_cycle
+    assert r.cycles == r.last_cycle - r.first_cycle + 1 - sum(g["lost"] or 0 for g in r.gaps)
