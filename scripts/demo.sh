@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # The main job: install what is needed, build everything that is missing
 # (kernel from cache, remoteproc module, initramfs, servo firmware), boot the
-# emulated Zynq-7000 in QEMU, load and start the servo firmware through the
-# remoteproc sysfs, show it running (its trace log and heartbeat), stop it
-# and shut down cleanly.
+# emulated Zynq-7000 in QEMU, start servod, load and start the servo
+# firmware through the remoteproc sysfs, show the cycle running (trace log,
+# ampctl status/stats, parameters, a hang and its recovery), stop it and
+# shut down cleanly; then record a run into an MCAP file with plots
+# (build/demo/run.mcap, build/demo/plots/).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"
 scripts/bootstrap.sh
-exec .venv/bin/python scripts/west_commands/emu.py --accel tcg,thread=single --script scripts/demo/guest-commands.sh "$@"
+.venv/bin/python scripts/west_commands/emu.py --accel tcg,thread=single --script scripts/demo/guest-commands.sh "$@"
+exec scripts/demo/record.sh
