@@ -9,7 +9,9 @@
 # eth0 up with 10.0.2.15/24 for QEMU user networking, run on demand, e.g. by
 # the recording tests before servod), the module given with --module in
 # /lib/modules/, every --firmware file in /lib/firmware/ (same name), and
-# every --bin file (static armhf programs: servod, ampctl) in /usr/bin/.
+# every --bin file (static armhf programs: servod, ampctl) in /usr/bin/, and
+# the G-code examples of the repository (examples/*.nc) in
+# /usr/share/servoamp/examples/ (`ampctl run /usr/share/servoamp/examples/...`).
 #
 # busybox-static:armhf comes from the machine's own Debian mirror through a
 # PRIVATE apt configuration (own sources list, state and cache directories;
@@ -47,6 +49,8 @@ done
 [ -z "$module" ] || [ -f "$module" ] || die "module $module not found"
 for f in "${firmware[@]}"; do [ -f "$f" ] || die "firmware $f not found"; done
 for f in "${bins[@]}"; do [ -f "$f" ] || die "program $f not found"; done
+examples=()
+for f in "$repo"/examples/*.nc; do [ -f "$f" ] && examples+=("$f"); done
 
 gen_init_cpio=$repo/build/kernel/obj/usr/gen_init_cpio
 [ -x "$gen_init_cpio" ] || die "$gen_init_cpio missing: run linux/kernel/build.sh first"
@@ -91,6 +95,7 @@ key=$({
 	[ -z "$module" ] || printf '%s %s\n' "$(sha256sum <"$module")" "$(basename "$module")"
 	for f in "${firmware[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 	for f in "${bins[@]}"; do printf 'bin %s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
+	for f in "${examples[@]}"; do printf 'example %s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 } | sha256sum | cut -c1-16)
 out=$cache/initramfs/$key
 image=$out/initramfs.cpio.gz
@@ -117,7 +122,8 @@ bb=$stage/deb/bin/busybox
 list=$stage/list
 {
 	for d in /bin /sbin /dev /proc /sys /tmp /root /etc /lib /lib/modules \
-		/lib/firmware /usr /usr/bin /usr/sbin /var /run; do
+		/lib/firmware /usr /usr/bin /usr/sbin /usr/share /usr/share/servoamp \
+		/usr/share/servoamp/examples /var /run; do
 		echo "dir $d 755 0 0"
 	done
 	echo "nod /dev/console 600 0 0 c 5 1"
@@ -132,6 +138,9 @@ list=$stage/list
 	done
 	for f in "${bins[@]}"; do
 		echo "file /usr/bin/$(basename "$f") $f 755 0 0"
+	done
+	for f in "${examples[@]}"; do
+		echo "file /usr/share/servoamp/examples/$(basename "$f") $f 644 0 0"
 	done
 } >"$list"
 

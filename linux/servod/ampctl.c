@@ -10,10 +10,14 @@
  *   ampctl [-s SOCKET] resume               leave SAFESTOP
  *   ampctl [-s SOCKET] debug hang|crash     make the firmware fail (tests)
  *   ampctl [-s SOCKET] raw CMD NBYTES [WORD...]   raw mailbox request (tests)
+ *   ampctl [-s SOCKET] run FILE.nc          run a G-code program (path as servod sees it)
+ *   ampctl [-s SOCKET] stop                 decelerate along the path and hold
  *
  * Exit status: 0 ok, 1 usage, 2 servod not reachable, 3 servo not running,
  * 4 timeout, 5 unknown parameter, 6 bad value (type/range), 7 other servo
- * error, 8 servod could not store the parameter file (linux/servod/servod.h).
+ * error, 8 servod could not store the parameter file, 9 program refused
+ * (unreadable or malformed: file:line:column: error), 10 a program is
+ * already running (linux/servod/servod.h).
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -42,11 +46,19 @@ int main(int argc, char **argv)
 	}
 	if (i >= argc || !strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 		fprintf(stderr, "usage: ampctl [-s SOCKET] status | stats | param list | param get NAME |\n"
-				"              param set NAME VALUE | resume | debug hang|crash | raw CMD NBYTES [WORD...]\n");
+				"              param set NAME VALUE | resume | debug hang|crash | raw CMD NBYTES [WORD...] |\n"
+				"              run FILE.nc | stop\n");
 		return SE_USAGE;
 	}
-	for (; i < argc; i++) {
-		int n = snprintf(req + len, sizeof(req) - len, "%s%s", len ? " " : "", argv[i]);
+	for (int first = i; i < argc; i++) {
+		const char *a = argv[i];
+		char abs[4096];
+		int n;
+
+		/* run FILE: servod opens it, so send an absolute path */
+		if (i == first + 1 && !strcmp(argv[first], "run") && a[0] != '/' && realpath(a, abs))
+			a = abs;
+		n = snprintf(req + len, sizeof(req) - len, "%s%s", len ? " " : "", a);
 
 		if (n < 0 || (size_t)n >= sizeof(req) - len) {
 			fprintf(stderr, "ampctl: request too long\n");

@@ -4,14 +4,17 @@
  *
  *   servod [-s SOCKET] [-p PARAMFILE] [-a AMPLITUDE_INC] [-f FREQ_HZ]
  *          [--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N]
- *          [--telemetry ADDR:PORT|off] [--id CONTROLLER_ID] [-v]
+ *          [--telemetry ADDR:PORT|off] [--id CONTROLLER_ID]
+ *          [--inc-per-mm N] [--vmax MM_S] [--amax MM_S2] [--travel MM]
+ *          [--idle sine|hold] [-v]
  *
  * Cycle thread (SCHED_FIFO, mlockall): waits for the cycle interrupt with
  * read() on the UIO device "cycle-interrupt", acknowledges its own flag
  * (TTC1 counter 1's clear-on-read interrupt register, mapped through the
  * same UIO device) and re-enables the interrupt (write 1), then runs
  * amp_linux_cycle(): heartbeat, semaphore, feedback read, coarse setpoints
- * written (a sine per axis), semaphore set. It counts cycles, exchanges,
+ * written (a sine per axis, or a G-code program's setpoints popped from a
+ * lock-free ring: program.c), semaphore set. It counts cycles, exchanges,
  * missed interrupts (time between two wake-ups), late cycles and its
  * wake-up latency (interrupt to thread running, read from the counter of
  * its own TTC counter, which restarts at every interval event).
@@ -63,6 +66,7 @@
 
 #include "amp/amp.h"
 #include "servoamp/servo_proto.h"
+#include "program.h"
 #include "servod.h"
 #include "telem.h"
 
@@ -86,8 +90,9 @@ static struct {
 	uint32_t servo_clock_hz;	/* rate of the feedback's t_cycle / irq_latency ticks */
 	const char *telem;		/* ADDR:PORT or "off" */
 	const char *id;			/* controller id in the telemetry HELLO */
+	struct prog_opts prog;		/* G-code runner: scale, planner limits, idle mode */
 } opt = { SERVOD_SOCKET, SERVOD_PARAMS, 2000.0, 0.5, 133000000u, 80, 0, 100000000u, "0.0.0.0:7700",
-	  "zynq7000_qemu" };
+	  "zynq7000_qemu", { 1000.0, 200.0, 2000.0, 500.0, 1000u, 0 } };
 
 /* Telemetry (static: the struct is 64-byte aligned). */
 static struct telem telem;
@@ -581,10 +586,16 @@ static void *cycle_thread(void *arg)
 				cmd[i].vel_ff = 0;
 				cmd[i].torque_offset = 0;
 			}
+			/* a G-code program (or the hold after one) replaces the sine:
+			 * one setpoint popped from a lock-free ring (program.c) */
+			prog_cycle(cmd, n, amp.cmd_seq + 1u);
 			/* 2-5: semaphore, feedback, commands, semaphore */
 			memset(&rx, 0, sizeof(rx));
 			rc = amp_linux_cycle(&amp, cmd, n, SP_CMDF_MOTION, &rx);
 			t_done = now_ns();
+			prog_feedback(rc, &amp.fb, n,
+				      (rc == AMP_OK || rc == AMP_E_PEER_ERROR) &&
+				      (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED));
 			st.cycles++;
 			if (telem_on) {
 				/* one record per cycle into the lock-free ring: no
@@ -966,6 +977,12 @@ static int req_status(struct out *o, char *msg, size_t n)
 	    pset[SP_P_wd_limit]);
 	put(o, "params_restored_attach=%u restores=%llu recoveries=%llu recovering=%d\n",
 	    restored_attach, (unsigned long long)restores, (unsigned long long)recoveries, recovering);
+	{
+		char pb[2048];
+
+		prog_format_status(pb, sizeof(pb));
+		put(o, "%s", pb);
+	}
 	if (peer != AMP_OK) {
 		snprintf(msg, n, "servo not running (remoteproc %s, link: %s)", rproc_state(),
 			 amp_strerror(peer));
@@ -1033,6 +1050,12 @@ static int req_stats(struct out *o, char *msg, size_t n)
 		       "telem.ring_high_water=%u\n",
 		    ts.clients, (unsigned long long)ts.clients_total, (unsigned long long)ts.bytes_sent,
 		    ts.ring_high_water);
+	}
+	{
+		char pb[2048];
+
+		prog_format_stats(pb, sizeof(pb));
+		put(o, "%s", pb);
 	}
 	rc = servo_status(&s, msg, n);
 	if (rc) {
@@ -1161,14 +1184,50 @@ static int req_raw(struct out *o, int argc, char **argv, char *msg, size_t n)
 	return SE_OK;
 }
 
+static void supervise(void);
+
+/* "run FILE": starts the run (program.c), then waits for the verdict of the
+ * dry run (whole program checked before any motion) up to 5 s, keeping the
+ * supervisor going meanwhile. */
+static int req_run(struct out *o, int argc, char **argv, char *msg, size_t n)
+{
+	int rc, refused = 0;
+
+	if (argc != 1) {
+		snprintf(msg, n, "usage: run FILE");
+		return SE_USAGE;
+	}
+	rc = prog_run(argv[0], pset[SP_P_cycle_period_us], msg, n);
+	if (rc)
+		return rc;
+	logm("program %s: checking", argv[0]);
+	for (int i = 0; i < 250; i++) {
+		struct timespec ts = { 0, 20000000 };
+
+		if (prog_verdict(&refused, msg, n)) {
+			if (refused) {
+				logm("program refused: %s", msg);
+				return SE_PROGRAM;
+			}
+			logm("program %s", msg);
+			put(o, "%s\n", msg);
+			return SE_OK;
+		}
+		supervise();
+		nanosleep(&ts, 0);
+	}
+	put(o, "%s: still checking (ampctl status shows the verdict)\n", argv[0]);
+	return SE_OK;
+}
+
 static void handle_client(int fd)
 {
-	char line[512], msg[256] = "", *argv[24], *save = 0, *tok;
+	char line[512], msg[512] = "", *argv[24], *save = 0, *tok;
 	struct out o = { malloc(1024), 0, 1024 };
 	int argc = 0, rc = SE_USAGE;
 	ssize_t r = 0, got = 0;
 	struct pollfd pfd = { fd, POLLIN, 0 };
-	char head[300];
+	char head[600];
 
 	while (got < (ssize_t)sizeof(line) - 1 && poll(&pfd, 1, 1000) > 0) {
 		r = read(fd, line + got, sizeof(line) - 1 - (size_t)got);
@@ -1191,6 +1250,12 @@ static void handle_client(int fd)
 		rc = req_param(&o, argc - 1, argv + 1, msg, sizeof(msg));
 	} else if (!strcmp(argv[0], "raw")) {
 		rc = req_raw(&o, argc - 1, argv + 1, msg, sizeof(msg));
+	} else if (!strcmp(argv[0], "run")) {
+		rc = req_run(&o, argc - 1, argv + 1, msg, sizeof(msg));
+	} else if (!strcmp(argv[0], "stop")) {
+		rc = prog_stop(msg, sizeof(msg));
+		if (!rc)
+			put(&o, "%s\n", msg);
 	} else if (!strcmp(argv[0], "resume") || !strcmp(argv[0], "debug")) {
 		uint32_t w = 0, len = 0, cmd = SP_CMD_RESUME;
 		int32_t status;
@@ -1439,14 +1504,31 @@ int main(int argc, char **argv)
 			opt.telem = argv[++i];
 		else if (!strcmp(argv[i], "--id") && i + 1 < argc)
 			opt.id = argv[++i];
+		else if (!strcmp(argv[i], "--inc-per-mm") && i + 1 < argc)
+			opt.prog.inc_per_mm = atof(argv[++i]);
+		else if (!strcmp(argv[i], "--vmax") && i + 1 < argc)
+			opt.prog.vmax = atof(argv[++i]);
+		else if (!strcmp(argv[i], "--amax") && i + 1 < argc)
+			opt.prog.amax = atof(argv[++i]);
+		else if (!strcmp(argv[i], "--travel") && i + 1 < argc)
+			opt.prog.travel = atof(argv[++i]);
+		else if (!strcmp(argv[i], "--idle") && i + 1 < argc && !strcmp(argv[i + 1], "hold"))
+			opt.prog.idle_hold = 1, i++;
+		else if (!strcmp(argv[i], "--idle") && i + 1 < argc && !strcmp(argv[i + 1], "sine"))
+			opt.prog.idle_hold = 0, i++;
 		else if (!strcmp(argv[i], "-v"))
 			opt.verbose = 1;
 		else {
 			fprintf(stderr, "usage: servod [-s SOCKET] [-p PARAMFILE] [-a AMPLITUDE_INC] [-f FREQ_HZ] "
 					"[--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N] "
-					"[--telemetry ADDR:PORT|off] [--id NAME] [-v]\n");
+					"[--telemetry ADDR:PORT|off] [--id NAME] [--inc-per-mm N] [--vmax MM_S] "
+					"[--amax MM_S2] [--travel MM] [--idle sine|hold] [-v]\n");
 			return 1;
 		}
+	}
+	if (!(opt.prog.inc_per_mm > 0 && opt.prog.vmax > 0 && opt.prog.amax > 0 && opt.prog.travel > 0)) {
+		fprintf(stderr, "servod: --inc-per-mm, --vmax, --amax and --travel must be > 0\n");
+		return 1;
 	}
 	if (parse_telem_opt(opt.telem)) {
 		fprintf(stderr, "servod: --telemetry wants ADDR:PORT, [ADDR6]:PORT or off, not '%s'\n", opt.telem);
@@ -1456,6 +1538,7 @@ int main(int argc, char **argv)
 	params_load();
 	period_ns = pset[SP_P_cycle_period_us] * 1000u;
 	motion_axes = pset[SP_P_axes];
+	opt.prog.period_us = pset[SP_P_cycle_period_us];
 
 	rc = uio_open("ocm-mailbox", &ocm, &size, &offs);
 	if (rc < 0) {
@@ -1477,6 +1560,7 @@ int main(int argc, char **argv)
 	pthread_mutexattr_init(&ma);
 	pthread_mutexattr_setprotocol(&ma, PTHREAD_PRIO_INHERIT);
 	pthread_mutex_init(&amp_lock, &ma);
+	prog_init(&opt.prog, &amp_lock);
 
 	signal(SIGINT, on_signal);
 	signal(SIGTERM, on_signal);

@@ -3,7 +3,8 @@
  * servod.h - what servod and ampctl share besides servoamp/servo_proto.h:
  * the local control socket. One request line per connection
  * ("status", "stats", "param list", "param get NAME", "param set NAME VALUE",
- * "resume", "debug hang|crash", "raw CMD NBYTES [WORD...]"); the answer is
+ * "resume", "debug hang|crash", "raw CMD NBYTES [WORD...]", "run FILE",
+ * "stop"); the answer is
  * one status line, "OK" or "ERR <code> <message>", then the body, then EOF.
  */
 #ifndef SERVOD_H
@@ -23,6 +24,8 @@ enum servod_err {
 	SE_VALUE = 6,		/* bad value: out of range, wrong type */
 	SE_SERVO = 7,		/* the servo answered with another error */
 	SE_IO = 8,		/* servod could not store the parameter file */
+	SE_PROGRAM = 9,		/* G-code program refused (unreadable, malformed: file:line:col) */
+	SE_BUSY = 10,		/* a program is running */
 };
 
 #endif

@@ -1,6 +1,6 @@
 """The demo's last step: record the emulated controller into MCAP.
 
-    python -m servoamp.demo_record [--seconds N] [--out build/demo] [--keep-logs]
+    python -m servoamp.demo_record [--seconds N] [--out build/demo] [--keep-logs] [--program]
 
 Boots the emulated board with networking (gem0 on QEMU user networking,
 host 127.0.0.1:PORT -> guest 7700, see servoamp.netboard), starts servod and
@@ -8,6 +8,13 @@ the firmware, records N seconds (default 5) of every cycle while changing a
 parameter and hanging the firmware on purpose (servod detects it, remoteproc
 recovers it), then writes build/demo/run.mcap, the plots in
 build/demo/plots/, prints ``servoamp info`` and where the files are.
+
+With ``--program`` the axes run seed 004's G-code program (a square and a
+circle, examples/seed004_squares_circles.nc) through servod's motion
+pipeline during the recording instead of the idle sines, so
+plots/xy_path.png shows the square and the circle; the firmware hang is
+then left out (it would end the program) and the recording lasts at least
+9 s.
 """
 
 from __future__ import annotations
@@ -20,6 +27,9 @@ from pathlib import Path
 
 from servoamp import info, netboard, plot, qemu
 from servoamp.record import RecordResult, record
+
+
+PROGRAM = "/usr/share/servoamp/examples/seed004_squares_circles.nc"
 
 
 def _say(msg: str) -> None:
@@ -35,7 +45,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--port", type=int, default=0, help="host port (default: a free one)")
     ap.add_argument("--keep-logs", action="store_true", help="keep the UART logs")
     ap.add_argument("--no-fault", action="store_true", help="no firmware hang during the recording")
+    ap.add_argument("--program", action="store_true",
+                    help="run seed 004's G-code program (square and circle) while recording")
     args = ap.parse_args(argv)
+    if args.program:
+        args.no_fault = True
+        args.seconds = max(args.seconds, 9.0)
 
     t0 = time.monotonic()
     out: Path = args.out
@@ -66,6 +81,8 @@ def main(argv: list[str] | None = None) -> int:
         th.start()
         time.sleep(min(1.5, args.seconds / 3))
         _say("ampctl " + cb.ampctl("param set pos_kp 70").strip())
+        if args.program:
+            _say("ampctl run: " + cb.ampctl(f"run {PROGRAM}").strip())
         if not args.no_fault:
             time.sleep(min(1.0, args.seconds / 4))
             cb.ampctl("debug hang")
@@ -74,6 +91,12 @@ def main(argv: list[str] | None = None) -> int:
         th.join()
         res = box["r"]
         stats = cb.stats()
+        if args.program:
+            st = cb.ampctl("status", expected_rc=None)
+            state = next((ln for ln in st.splitlines() if ln.startswith("program.state=")), "")
+            _say(f"program {state}: path error max {stats.get('motion.path_err.max_um')} um, "
+                 f"rms {stats.get('motion.path_err.rms_um')} um; following error max "
+                 f"{stats.get('motion.follow_err.max_um')} um")
     _say(f"recorded {res.cycles} cycles, {res.messages} messages, {len(res.gaps)} gap(s); "
          f"servod: cycles {stats.get('linux.cycles')}, telemetry pushed "
          f"{stats.get('telem.pushed')}, dropped {stats.get('telem.dropped')}, "
