@@ -50,6 +50,9 @@ const char *motion_errcode_name(enum motion_errcode code)
 	return "?";
 }
 
+/* A segment by its position in the segment ring (see struct seg). */
+static inline const struct seg *seg_at(const struct motion *m, uint32_t pos);
+
 /* ---- input: a byte stream with watermarks, or a program in memory ---- */
 
 /* The writer's and the decoder's fields are on separate cache lines
@@ -90,6 +93,7 @@ struct motion {
 	/* read-mostly */
 	struct motion_config cfg;
 	double T;    /* period, s */
+	uint32_t na; /* axes (config.n_axes): items are sized by it */
 	double ipm;  /* increments per mm */
 	struct sched *sched;
 	bool threaded;
@@ -118,8 +122,8 @@ struct motion {
 	double fit_prev[MOTION_MAX_AXES];
 	_Atomic uint64_t n_segs;
 
-	/* look-ahead window */
-	_Alignas(CL) struct seg *win;
+	/* look-ahead window: segment-ring positions of the segments */
+	_Alignas(CL) uint32_t *win;
 	double *bwd, *jl;
 	uint32_t w_head, w_n, W;
 	double la_fixed;
@@ -132,6 +136,7 @@ struct motion {
 
 	/* interp */
 	_Alignas(CL) struct profile cur;
+	const struct seg *cur_g; /* cur's segment (in the segment ring) */
 	bool cur_valid;
 	double tau, tau_start;
 	atomic_bool interp_moving, interp_done;
@@ -143,6 +148,11 @@ struct motion {
 	uint64_t sink_sum;
 	_Atomic uint64_t n_setpoints, n_underruns;
 };
+
+static inline const struct seg *seg_at(const struct motion *m, uint32_t pos)
+{
+	return ring_at(&m->q[Q_SEGS], pos);
+}
 
 static void set_error(struct motion *m, enum motion_errcode code, uint32_t line,
 		      uint32_t col, const char *fmt, ...)
@@ -493,7 +503,7 @@ static void seg_limits(const struct motion *m, struct seg *s, double feed,
 	double v = rapid ? INFINITY : feed, a = INFINITY, j = INFINITY;
 
 	for (uint32_t k = 0; k < c->n_axes; k++) {
-		double au = fabs(s->u[k]);
+		double au = fabs(SEG_U(s, m->na)[k]);
 		if (au < 1e-12)
 			continue;
 		double vk = c->axis[k].vmax / au;
@@ -514,22 +524,26 @@ static void seg_limits(const struct motion *m, struct seg *s, double feed,
 static bool make_move(const struct motion *m, struct seg *s, const double *p0,
 		      const double *p1, uint32_t line, double feed, bool rapid)
 {
+	const uint32_t n = m->na;
+	double *sp0 = SEG_P0(s, n), *sp1 = SEG_P1(s, n), *su = SEG_U(s, n);
 	double l2 = 0;
 
-	memset(s, 0, sizeof(*s));
+	/* the axes from n_axes on never move (the decoder rejects their
+	 * words), so they would only add exact zeros to the length */
 	s->kind = SEG_MOVE;
 	s->line = line;
-	for (uint32_t k = 0; k < MOTION_MAX_AXES; k++) {
-		s->p0[k] = p0[k];
-		s->p1[k] = p1[k];
+	s->dwell = 0;
+	for (uint32_t k = 0; k < n; k++) {
+		sp0[k] = p0[k];
+		sp1[k] = p1[k];
 		double d = p1[k] - p0[k];
 		l2 += d * d;
 	}
 	s->len = sqrt(l2);
 	if (s->len < 1e-9)
 		return false;
-	for (uint32_t k = 0; k < MOTION_MAX_AXES; k++)
-		s->u[k] = (p1[k] - p0[k]) / s->len;
+	for (uint32_t k = 0; k < n; k++)
+		su[k] = (p1[k] - p0[k]) / s->len;
 	seg_limits(m, s, feed, rapid);
 	return true;
 }
@@ -597,18 +611,20 @@ static uint32_t fit_run(void *arg, unsigned worker)
 				m->fit_n = arc_segments(m, &m->blk);
 				break;
 			case GC_DWELL:
-				memset(s, 0, sizeof(*s));
+				memset(s, 0, m->q[Q_SEGS].elem);
 				s->kind = SEG_DWELL;
 				s->line = m->blk.line;
 				s->dwell = m->blk.dwell;
-				memcpy(s->p0, m->blk.start, sizeof(s->p0));
-				memcpy(s->p1, m->blk.start, sizeof(s->p1));
+				memcpy(SEG_P0(s, m->na), m->blk.start,
+				       m->na * sizeof(double));
+				memcpy(SEG_P1(s, m->na), m->blk.start,
+				       m->na * sizeof(double));
 				ring_commit(&m->q[Q_SEGS]);
 				m->fit_have = false;
 				done++;
 				continue;
 			case GC_END:
-				memset(s, 0, sizeof(*s));
+				memset(s, 0, m->q[Q_SEGS].elem);
 				s->kind = SEG_END;
 				s->line = m->blk.line;
 				ring_commit(&m->q[Q_SEGS]);
@@ -678,22 +694,24 @@ static double reach(const struct motion *m, const struct seg *s, double v)
 
 #define WIN(m, i) (((m)->w_head + (i)) % (m)->W)
 
-static void la_add(struct motion *m, const struct seg *s)
+static void la_add(struct motion *m, uint32_t pos)
 {
+	const struct seg *s = seg_at(m, pos);
 	uint32_t n = m->w_n, idx = WIN(m, n);
 	double jl = 0;
 
 	if (s->kind == SEG_MOVE) {
+		const double *u = SEG_U(s, m->na);
 		if (m->la_prev_move)
-			jl = junction_limit(m, m->la_prev_u, s->u, m->la_prev_vmax,
+			jl = junction_limit(m, m->la_prev_u, u, m->la_prev_vmax,
 					    s->vmax);
-		memcpy(m->la_prev_u, s->u, sizeof(m->la_prev_u));
+		memcpy(m->la_prev_u, u, m->na * sizeof(double));
 		m->la_prev_vmax = s->vmax;
 		m->la_prev_move = true;
 	} else {
 		m->la_prev_move = false;
 	}
-	m->win[idx] = *s;
+	m->win[idx] = pos;
 	m->jl[idx] = jl;
 	double b = reach(m, s, 0.0); /* the newest segment ends at rest */
 	m->bwd[idx] = b < jl ? b : jl;
@@ -702,7 +720,7 @@ static void la_add(struct motion *m, const struct seg *s)
 	 * where nothing changes any more */
 	for (uint32_t i = n; i-- > 0;) {
 		uint32_t k = WIN(m, i);
-		double nb = reach(m, &m->win[k], m->bwd[WIN(m, i + 1)]);
+		double nb = reach(m, seg_at(m, m->win[k]), m->bwd[WIN(m, i + 1)]);
 		if (nb > m->jl[k])
 			nb = m->jl[k];
 		if (nb <= m->bwd[k])
@@ -718,7 +736,7 @@ static bool la_emit(struct motion *m)
 	if (!p || m->w_n == 0)
 		return false;
 	uint32_t k = WIN(m, 0);
-	const struct seg *s = &m->win[k];
+	const struct seg *s = seg_at(m, m->win[k]);
 	double v0 = m->la_fixed, v1 = 0;
 	if (s->kind == SEG_MOVE && m->w_n >= 2) {
 		v1 = m->bwd[WIN(m, 1)];
@@ -728,7 +746,8 @@ static bool la_emit(struct motion *m)
 	}
 	if (s->kind != SEG_MOVE)
 		v0 = v1 = 0;
-	p->s = *s;
+	p->seg = m->win[k];
+	p->kind = s->kind;
 	p->v0 = v0;
 	p->v1 = v1;
 	ring_commit(&m->q[Q_PLANNED]);
@@ -791,7 +810,7 @@ static uint32_t la_run(void *arg, unsigned worker)
 				if (s->kind == SEG_END)
 					m->la_flushing = true;
 				else
-					la_add(m, s);
+					la_add(m, ring_front_pos(&m->q[Q_SEGS]));
 				ring_release(&m->q[Q_SEGS]);
 				done++;
 				continue;
@@ -809,7 +828,7 @@ static uint32_t la_run(void *arg, unsigned worker)
 			if (!p)
 				break;
 			memset(p, 0, sizeof(*p));
-			p->s.kind = SEG_END;
+			p->kind = SEG_END;
 			ring_commit(&m->q[Q_PLANNED]);
 			m->la_flushing = false;
 			m->la_prev_move = false;
@@ -840,11 +859,18 @@ static uint32_t accel_run(void *arg, unsigned worker)
 
 	(void)worker;
 	while (done < m->cfg.batch) {
-		struct profile *p = ring_slot(&m->q[Q_PROFILES]);
+		struct timed *p = ring_slot(&m->q[Q_PROFILES]);
 		const struct planned *in = ring_front(&m->q[Q_PLANNED]);
 		if (!p || !in)
 			break;
-		plan_profile(p, in, m->cfg.jerk_limited);
+		p->seg = in->seg;
+		p->kind = in->kind;
+		p->v0 = in->v0;
+		p->v1 = in->v1;
+		p->vp = in->kind == SEG_MOVE
+				? plan_peak(seg_at(m, in->seg), in->v0, in->v1,
+					    m->cfg.jerk_limited)
+				: 0.0;
 		ring_release(&m->q[Q_PLANNED]);
 		ring_commit(&m->q[Q_PROFILES]);
 		done++;
@@ -867,24 +893,44 @@ static int32_t to_inc(double v)
 	return (int32_t)r;
 }
 
-static void make_setpoint(const struct motion *m, struct motion_setpoint *sp,
-			  const struct profile *p, double tau, bool at_end)
+/* Setpoints travel through their ring compactly, sized by the number of
+ * axes n: int32 line, pos[n], vel[n] (status MOVING, cycle assigned by the
+ * consumer).  sp_unpack() makes the public struct motion_setpoint. */
+static inline size_t sp_size(uint32_t n_axes)
 {
-	double s = 0, v = 0;
+	return (1u + 2u * n_axes) * sizeof(int32_t);
+}
+
+static void sp_unpack(const struct motion *m, const int32_t *c,
+		      struct motion_setpoint *sp)
+{
+	const uint32_t n = m->na;
 
 	memset(sp, 0, sizeof(*sp));
-	sp->n_axes = (uint8_t)m->cfg.n_axes;
-	sp->line = p->s.line;
+	sp->n_axes = (uint8_t)n;
+	sp->line = (uint32_t)c[0];
 	sp->status = MOTION_ST_MOVING;
-	if (!at_end && p->s.kind == SEG_MOVE)
-		plan_eval(p, tau, &s, &v);
-	bool end = at_end || (p->s.kind == SEG_MOVE && s >= p->s.len);
-	double f = p->s.len > 0 ? s / p->s.len : 0.0;
-	for (uint32_t k = 0; k < m->cfg.n_axes; k++) {
-		double x = end ? p->s.p1[k]
-			       : p->s.p0[k] + (p->s.p1[k] - p->s.p0[k]) * f;
-		sp->pos[k] = to_inc(x * m->ipm);
-		sp->vel[k] = at_end ? 0 : to_inc(v * p->s.u[k] * m->ipm);
+	memcpy(sp->pos, c + 1, n * sizeof(int32_t));
+	memcpy(sp->vel, c + 1 + n, n * sizeof(int32_t));
+}
+
+static void make_setpoint(const struct motion *m, int32_t *sp,
+			  const struct profile *p, const struct seg *g,
+			  double tau, bool at_end)
+{
+	const uint32_t n = m->na;
+	const double *p0 = SEG_P0(g, n), *p1 = SEG_P1(g, n), *u = SEG_U(g, n);
+	double s = 0, v = 0;
+
+	sp[0] = (int32_t)g->line;
+	if (!at_end && p->kind == SEG_MOVE)
+		plan_eval(p, g->len, tau, &s, &v);
+	bool end = at_end || (p->kind == SEG_MOVE && s >= g->len);
+	double f = g->len > 0 ? s / g->len : 0.0;
+	for (uint32_t k = 0; k < n; k++) {
+		double x = end ? p1[k] : p0[k] + (p1[k] - p0[k]) * f;
+		sp[1 + k] = to_inc(x * m->ipm);
+		sp[1 + n + k] = at_end ? 0 : to_inc(v * u[k] * m->ipm);
 	}
 }
 
@@ -900,6 +946,13 @@ static void interp_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 	*dcap = m->q[Q_SETPOINTS].cap;
 }
 
+/* Makes a planned segment the current one: expands its timed profile. */
+static void interp_take(struct motion *m, const struct timed *t)
+{
+	m->cur_g = seg_at(m, t->seg);
+	plan_profile(&m->cur, m->cur_g, t->v0, t->vp, t->v1, m->cfg.jerk_limited);
+}
+
 static uint32_t interp_run(void *arg, unsigned worker)
 {
 	struct motion *m = arg;
@@ -909,47 +962,47 @@ static uint32_t interp_run(void *arg, unsigned worker)
 	(void)worker;
 	while (done < m->cfg.batch) {
 		if (!m->cur_valid) {
-			const struct profile *p = ring_front(&m->q[Q_PROFILES]);
+			const struct timed *p = ring_front(&m->q[Q_PROFILES]);
 			if (!p)
 				break;
-			if (p->s.kind == SEG_END) {
+			if (p->kind == SEG_END) {
 				ring_release(&m->q[Q_PROFILES]);
 				atomic_store(&m->interp_done, true);
 				done++;
 				continue;
 			}
 			atomic_store(&m->interp_done, false);
-			m->cur = *p;
+			interp_take(m, p);
 			ring_release(&m->q[Q_PROFILES]);
 			m->cur_valid = true;
 			m->tau = m->tau_start;
 			atomic_store(&m->interp_moving, true);
 		}
 		if (m->tau <= m->cur.dur) {
-			struct motion_setpoint *sp = ring_slot(out);
+			int32_t *sp = ring_slot(out);
 			if (!sp)
 				break;
-			make_setpoint(m, sp, &m->cur, m->tau, false);
+			make_setpoint(m, sp, &m->cur, m->cur_g, m->tau, false);
 			ring_commit(out);
 			m->tau += m->T;
 			done++;
 			continue;
 		}
 		/* past the end of the current profile */
-		const struct profile *nx = ring_front(&m->q[Q_PROFILES]);
-		if (nx && nx->s.kind != SEG_END) {
+		const struct timed *nx = ring_front(&m->q[Q_PROFILES]);
+		if (nx && nx->kind != SEG_END) {
 			m->tau -= m->cur.dur;
-			m->cur = *nx;
+			interp_take(m, nx);
 			ring_release(&m->q[Q_PROFILES]);
 			continue;
 		}
 		if (m->cur.v1 > 1e-9)
 			break; /* moving: wait for the next profile */
 		/* at rest: one sample exactly at the end point, then idle */
-		struct motion_setpoint *sp = ring_slot(out);
+		int32_t *sp = ring_slot(out);
 		if (!sp)
 			break;
-		make_setpoint(m, sp, &m->cur, m->tau, true);
+		make_setpoint(m, sp, &m->cur, m->cur_g, m->tau, true);
 		ring_commit(out);
 		m->cur_valid = false;
 		m->tau_start = m->T;
@@ -973,17 +1026,22 @@ static void sink_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 static uint32_t sink_run(void *arg, unsigned worker)
 {
 	struct motion *m = arg;
-	struct motion_setpoint sp;
+	struct ring *q = &m->q[Q_SETPOINTS];
+	const int32_t *c;
+	int32_t last[1 + 2 * MOTION_MAX_AXES];
 	uint32_t done = 0;
 
 	(void)worker;
-	while (done < m->cfg.batch * 4 && ring_pop(&m->q[Q_SETPOINTS], &sp)) {
-		for (uint32_t k = 0; k < sp.n_axes; k++)
-			m->sink_sum += (uint64_t)(uint32_t)sp.pos[k];
-		m->last = sp;
+	while (done < m->cfg.batch * 4 && (c = ring_front(q)) != NULL) {
+		for (uint32_t k = 0; k < m->na; k++)
+			m->sink_sum += (uint64_t)(uint32_t)c[1 + k];
+		memcpy(last, c, q->elem);
+		ring_release(q);
 		m->cycle++;
 		done++;
 	}
+	if (done)
+		sp_unpack(m, last, &m->last);
 	atomic_fetch_add_explicit(&m->n_setpoints, done, memory_order_relaxed);
 	return done;
 }
@@ -1130,6 +1188,7 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	memset(m, 0, sizeof(*m));
 	m->cfg = *cfg;
 	m->T = cfg->period_us * 1e-6;
+	m->na = cfg->n_axes;
 	m->ipm = cfg->increments_per_mm;
 	pthread_mutex_init(&m->err_lock, NULL);
 	pthread_mutex_init(&m->src.flow_lock, NULL);
@@ -1143,11 +1202,16 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	atomic_init(&m->src.flow, MOTION_FLOW_XON);
 	if (!m->src.buf ||
 	    ring_init(&m->q[Q_BLOCKS], sizeof(struct gc_block), cfg->q_blocks) ||
-	    ring_init(&m->q[Q_SEGS], sizeof(struct seg), cfg->q_segments) ||
+	    /* segments are referred to by their slot until interpolation is
+	     * done with them: a slot is reused only after the segment ring,
+	     * the look-ahead window, the planned and profile queues and the
+	     * current profile have all moved past it */
+	    ring_init_slots(&m->q[Q_SEGS], seg_size(cfg->n_axes), cfg->q_segments,
+			    cfg->q_segments + cfg->lookahead + cfg->q_planned +
+				    cfg->q_profiles + 4u) ||
 	    ring_init(&m->q[Q_PLANNED], sizeof(struct planned), cfg->q_planned) ||
-	    ring_init(&m->q[Q_PROFILES], sizeof(struct profile), cfg->q_profiles) ||
-	    ring_init(&m->q[Q_SETPOINTS], sizeof(struct motion_setpoint),
-		      cfg->q_setpoints))
+	    ring_init(&m->q[Q_PROFILES], sizeof(struct timed), cfg->q_profiles) ||
+	    ring_init(&m->q[Q_SETPOINTS], sp_size(cfg->n_axes), cfg->q_setpoints))
 		goto nomem;
 	m->W = cfg->lookahead;
 	m->win = calloc(m->W, sizeof(*m->win));
@@ -1288,7 +1352,10 @@ enum motion_status motion_next_setpoint(struct motion *m,
 				sched_sample(m->sched);
 		}
 	}
-	if (ring_pop(q, out)) {
+	const int32_t *c = ring_front(q);
+	if (c) {
+		sp_unpack(m, c, out);
+		ring_release(q);
 		out->cycle = m->cycle++;
 		m->last = *out;
 		atomic_fetch_add_explicit(&m->n_setpoints, 1, memory_order_relaxed);

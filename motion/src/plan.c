@@ -96,18 +96,12 @@ static void trans_eval(const struct trans *t, double x, double *s, double *v)
 	}
 }
 
-void plan_profile(struct profile *p, const struct planned *in, bool jerk)
+double plan_peak(const struct seg *g, double v0, double v1, bool jerk)
 {
-	const struct seg *g = &in->s;
-	double a = g->amax, j = g->jmax, L = g->len;
-	double v0 = in->v0, v1 = in->v1, vp;
+	double a = g->amax, j = g->jmax, L = g->len, vp;
 
-	memset(p, 0, sizeof(*p));
-	p->s = *g;
-	if (g->kind != SEG_MOVE) {
-		p->dur = g->kind == SEG_DWELL ? g->dwell : 0.0;
-		return;
-	}
+	if (g->kind != SEG_MOVE)
+		return 0.0;
 	double vlo = v0 > v1 ? v0 : v1;
 	if (!jerk) {
 		vp = sqrt((2.0 * a * L + v0 * v0 + v1 * v1) / 2.0);
@@ -130,48 +124,74 @@ void plan_profile(struct profile *p, const struct planned *in, bool jerk)
 	}
 	if (vp < vlo)
 		vp = vlo;
+	return vp;
+}
+
+void plan_profile(struct profile *p, const struct seg *g, double v0, double vp,
+		  double v1, bool jerk)
+{
+	double a = g->amax, j = g->jmax, L = g->len;
+	struct trans tr1, tr3;
+
+	memset(p, 0, sizeof(*p));
+	p->kind = g->kind;
+	if (g->kind != SEG_MOVE) {
+		p->dur = g->kind == SEG_DWELL ? g->dwell : 0.0;
+		return;
+	}
 	p->v0 = v0;
 	p->v1 = v1;
 	p->vp = vp;
-	trans_init(&p->tr1, v0, vp, a, j, jerk);
-	trans_init(&p->tr3, vp, v1, a, j, jerk);
-	p->t1 = 2.0 * p->tr1.tj + p->tr1.ta;
-	p->t3 = 2.0 * p->tr3.tj + p->tr3.ta;
+	trans_init(&tr1, v0, vp, a, j, jerk);
+	trans_init(&tr3, vp, v1, a, j, jerk);
+	p->j = j;
+	p->sg1 = tr1.sigma > 0 ? 1 : -1;
+	p->A1 = tr1.A;
+	p->tj1 = tr1.tj;
+	p->ta1 = tr1.ta;
+	p->sg3 = tr3.sigma > 0 ? 1 : -1;
+	p->A3 = tr3.A;
+	p->tj3 = tr3.tj;
+	p->ta3 = tr3.ta;
+	p->t1 = 2.0 * tr1.tj + tr1.ta;
+	double t3 = 2.0 * tr3.tj + tr3.ta;
 	p->d1 = 0.5 * (v0 + vp) * p->t1;
-	double d3 = 0.5 * (vp + v1) * p->t3;
+	double d3 = 0.5 * (vp + v1) * t3;
 	double d2 = L - p->d1 - d3;
 	if (d2 < 0)
 		d2 = 0;
 	p->d2 = d2;
 	p->t2 = vp > 0 ? d2 / vp : 0.0;
-	p->dur = p->t1 + p->t2 + p->t3;
+	p->dur = p->t1 + p->t2 + t3;
 }
 
-void plan_eval(const struct profile *p, double t, double *s, double *v)
+void plan_eval(const struct profile *p, double len, double t, double *s, double *v)
 {
 	double ds, vv;
 
-	if (p->s.kind != SEG_MOVE) {
+	if (p->kind != SEG_MOVE) {
 		*s = 0;
 		*v = 0;
 		return;
 	}
 	if (t >= p->dur) {
-		*s = p->s.len;
+		*s = len;
 		*v = p->v1;
 		return;
 	}
 	if (t < p->t1) {
-		trans_eval(&p->tr1, t, &ds, &vv);
+		struct trans tr = { p->v0, (double)p->sg1, p->A1, p->j, p->tj1, p->ta1 };
+		trans_eval(&tr, t, &ds, &vv);
 	} else if (t < p->t1 + p->t2) {
 		ds = p->d1 + p->vp * (t - p->t1);
 		vv = p->vp;
 	} else {
-		trans_eval(&p->tr3, t - p->t1 - p->t2, &ds, &vv);
+		struct trans tr = { p->vp, (double)p->sg3, p->A3, p->j, p->tj3, p->ta3 };
+		trans_eval(&tr, t - p->t1 - p->t2, &ds, &vv);
 		ds += p->d1 + p->d2;
 	}
-	if (ds > p->s.len)
-		ds = p->s.len;
+	if (ds > len)
+		ds = len;
 	if (ds < 0)
 		ds = 0;
 	*s = ds;

@@ -7,15 +7,22 @@
 
 int ring_init(struct ring *r, size_t elem, uint32_t cap)
 {
+	return ring_init_slots(r, elem, cap, cap);
+}
+
+int ring_init_slots(struct ring *r, size_t elem, uint32_t cap, uint32_t slots)
+{
 	uint32_t size = 1;
 
 	memset(r, 0, sizeof(*r));
-	if (elem == 0 || cap == 0 || cap > (1u << 30))
+	if (elem == 0 || cap == 0 || cap > (1u << 30) || slots > (1u << 30))
 		return -1;
-	while (size < cap)
+	if (slots < cap)
+		slots = cap;
+	while (size < slots)
 		size <<= 1;
 	size_t stride = elem;
-	if (elem >= RING_CACHELINE / 2)
+	if (elem > RING_CACHELINE / 2)
 		stride = (elem + RING_CACHELINE - 1) / RING_CACHELINE * RING_CACHELINE;
 	if ((size_t)size > (SIZE_MAX - RING_CACHELINE) / stride)
 		return -1;

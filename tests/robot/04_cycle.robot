@@ -142,20 +142,25 @@ One Interrupt Per Cycle On Each Core
     [Documentation]    Linux's cycle interrupt (GIC 70, UIO) counts like the
     ...    servo's (GIC 69): each core acknowledges its own TTC counter.
     ${a}=    Stats
-    ${i1}=    Execute Shell Command    grep cycle-interrupt /proc/interrupts
+    ${i1}=    Execute Shell Command    cat /proc/uptime; grep cycle-interrupt /proc/interrupts
     Execute Shell Command    sleep 1
     ${b}=    Stats
-    ${i2}=    Execute Shell Command    grep cycle-interrupt /proc/interrupts
-    ${n1}=    Evaluate    int($i2.split()[1]) - int($i1.split()[1])
+    ${i2}=    Execute Shell Command    cat /proc/uptime; grep cycle-interrupt /proc/interrupts
+    # the window is measured in guest time (the shell commands around
+    # `sleep 1` take a variable part of it under TCG)
+    ${ms}=    Evaluate    (float($i2.split()[0]) - float($i1.split()[0])) * 1000
+    ${n1}=    Evaluate    int($i2.splitlines()[1].split()[1]) - int($i1.splitlines()[1].split()[1])
     ${wakes}=    Delta    ${a}    ${b}    linux.wakes
     ${miss}=    Delta    ${a}    ${b}    linux.missed_irq
     ${scyc}=    Delta    ${a}    ${b}    servo.cycles
     ${smiss}=    Delta    ${a}    ${b}    servo.missed
-    Log    1 s: linux irq ${n1} (+${miss} missed), servod wakes ${wakes}, servo cycles ${scyc} (+${smiss} missed)    console=True
+    Log    ${ms} ms: linux irq ${n1} (+${miss} missed), servod wakes ${wakes}, servo cycles ${scyc} (+${smiss} missed)    console=True
     # two snapshots taken a few ms apart: /proc/interrupts and servod's count
     Should Be True    abs(${n1} - ${wakes}) <= 30
-    Should Be True    900 <= ${n1} + ${miss} <= 1200
-    Should Be True    900 <= ${scyc} + ${smiss} <= 1200
+    # one interrupt per 1 ms cycle on each core, handled or counted missed
+    # (uptime has 10 ms resolution; the servo's snapshot is a few ms off)
+    Should Be True    abs(${n1} + ${miss} - ${ms}) <= 0.05 * ${ms} + 20
+    Should Be True    abs(${scyc} + ${smiss} - ${ms}) <= 0.05 * ${ms} + 40
 
 Parameter Round Trip For Every Parameter
     FOR    ${name}    ${value}    IN    &{TEST_PARAMS}
@@ -277,11 +282,17 @@ Crashed Firmware Is Recovered Too
     [Documentation]    Undefined instruction in the firmware's background
     ...    loop: the fault handler writes CRSH and waits for STOP; the
     ...    heartbeat stops with the cycle (interrupts masked in the handler).
+    ${a}=    Stats
     Ampctl    debug crash
     Wait For Servod Log    recovery complete    2
     Execute Shell Command    sleep 0.3
     ${s}=    Stats
-    Should Be Equal As Integers    ${s}[servo.attach_count]    3
+    # every re-attach is a recovery servod drove (a loaded host may add a
+    # genuine stall of its own, which is recovered the same way)
+    ${rec}=    Delta    ${a}    ${s}    linux.recoveries
+    ${att}=    Delta    ${a}    ${s}    servo.attach_count
+    Should Be True    ${rec} >= 1
+    Should Be Equal As Integers    ${att}    ${rec}
     Param Should Be    pos_kp    61.5
     Should Be Equal    ${s}[servo.state]    RUNNING
 

@@ -28,8 +28,10 @@ struct ring {
 	unsigned char *buf;
 	size_t elem;       /* item size, bytes */
 	size_t stride;     /* slot size: elem, rounded up to whole cache
-			      lines for items of a line or more, so that two
-			      items never share a line */
+			      lines for items of more than half a line, so
+			      that such an item never shares a line with
+			      another (smaller items pack; a 32-byte item
+			      takes half a line) */
 	uint32_t cap;      /* logical capacity, items */
 	uint32_t mask;     /* storage size - 1 (power of two >= cap) */
 	/* producer side */
@@ -42,6 +44,11 @@ struct ring {
 };
 
 int ring_init(struct ring *r, size_t elem, uint32_t cap);
+/* Like ring_init(), with storage for at least `slots` items (>= cap): an
+ * item's slot is then not reused until `slots - cap` further items have
+ * been consumed, so a consumer may hand out references to consumed items
+ * (ring_front_pos(), ring_at()) that stay valid for that long. */
+int ring_init_slots(struct ring *r, size_t elem, uint32_t cap, uint32_t slots);
 void ring_free(struct ring *r);
 
 /* Any thread (the scheduler's level functions, statistics). */
@@ -100,6 +107,18 @@ static inline void ring_release(struct ring *r)
 {
 	uint32_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
 	atomic_store_explicit(&r->head, h + 1u, memory_order_release);
+}
+
+/* Consumer: storage position of the item ring_front() returned. */
+static inline uint32_t ring_front_pos(const struct ring *r)
+{
+	return atomic_load_explicit(&r->head, memory_order_relaxed) & r->mask;
+}
+
+/* The item at a storage position (see ring_init_slots()). */
+static inline void *ring_at(const struct ring *r, uint32_t pos)
+{
+	return r->buf + (size_t)(pos & r->mask) * r->stride;
 }
 
 bool ring_push(struct ring *r, const void *item);
