@@ -28,21 +28,27 @@ from pathlib import Path
 QEMU = shutil.which("qemu-system-arm") or "qemu-system-arm"
 
 
+def _connect_unix(path: str, timeout: float) -> socket.socket:
+    """Connect to a unix socket QEMU is still creating, retrying until timeout."""
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.settimeout(timeout)
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            s.connect(path)
+            return s
+        except (FileNotFoundError, ConnectionRefusedError):
+            if time.monotonic() > deadline:
+                s.close()
+                raise
+            time.sleep(0.02)
+
+
 class GdbRemote:
     """Minimal GDB RSP client over a unix socket (acks on)."""
 
     def __init__(self, path: str, timeout: float = 5.0):
-        self.s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self.s.settimeout(timeout)
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                self.s.connect(path)
-                break
-            except (FileNotFoundError, ConnectionRefusedError):
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.02)
+        self.s = _connect_unix(path, timeout)
         self.buf = b""
         self.running = False
         # QEMU stops the VM when a debugger attaches; ask why (sync point).
@@ -143,17 +149,7 @@ class Hmp:
     PROMPT = b"(qemu) "
 
     def __init__(self, path: str, timeout: float = 5.0):
-        self.s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self.s.settimeout(timeout)
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                self.s.connect(path)
-                break
-            except (FileNotFoundError, ConnectionRefusedError):
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.02)
+        self.s = _connect_unix(path, timeout)
         self._until_prompt()
 
     def _until_prompt(self) -> str:
@@ -190,6 +186,24 @@ class Hmp:
         self.s.close()
 
 
+def _elf_entry(path: Path) -> int:
+    from elftools.elf.elffile import ELFFile
+
+    with open(path, "rb") as f:
+        return int(ELFFile(f).header["e_entry"])
+
+
+def _symbol(path: Path, name: str) -> int:
+    from elftools.elf.elffile import ELFFile
+
+    with open(path, "rb") as f:
+        symtab = ELFFile(f).get_section_by_name(".symtab")
+        syms = symtab.get_symbol_by_name(name) if symtab else None
+        if not syms:
+            raise KeyError(f"{name} not in {path}")
+        return int(syms[0]["st_value"])
+
+
 class QemuRpu:
     def __init__(self, workdir: Path, stub: Path, firmware: Path, extra: list[str] | None = None):
         self.dir = Path(workdir)
@@ -210,8 +224,14 @@ class QemuRpu:
             "-mon", "chardev=mon,mode=readline",
             "-chardev", f"socket,id=gdb,path={self.gdb_path},server=on,wait=off",
             "-gdb", "chardev:gdb",
+            # CPU0 runs the stub; CPU1 waits in the park loop until CPU0 has
+            # set up the timer and writes the firmware entry to the boot
+            # register, as the remoteproc driver does on the board
             "-device", f"loader,file={stub},cpu-num=0",
-            "-device", f"loader,file={firmware},cpu-num=1",
+            "-device", f"loader,file={firmware}",
+            "-device", f"loader,addr={_symbol(stub, 'park_loop'):#x},cpu-num=1",
+            "-device", f"loader,addr={_symbol(stub, 'stub_fw_entry'):#x},"
+                       f"data={_elf_entry(firmware):#x},data-len=4",
         ] + (extra or [])
         self.proc: subprocess.Popen | None = None
         self.hmp: Hmp | None = None
