@@ -82,6 +82,7 @@ struct source {
 	/* flow control (both sides, only at the watermarks) */
 	_Alignas(CL) pthread_mutex_t flow_lock;
 	atomic_int flow;
+	_Atomic uint32_t flow_lvl;	/* level at the latest XOFF/XON */
 	_Atomic uint64_t xoff, xon;
 };
 
@@ -202,6 +203,7 @@ static void flow_check(struct motion *m)
 	pthread_mutex_lock(&s->flow_lock);
 	lvl = src_level(s);
 	f = atomic_load(&s->flow);
+	atomic_store(&s->flow_lvl, lvl);
 	if (f == MOTION_FLOW_XON && lvl >= s->high) {
 		atomic_store(&s->flow, MOTION_FLOW_XOFF);
 		atomic_fetch_add(&s->xoff, 1);
@@ -259,6 +261,11 @@ enum motion_flow motion_stream_flow(const struct motion *m)
 uint32_t motion_stream_level(const struct motion *m)
 {
 	return src_level(&m->src);
+}
+
+uint32_t motion_stream_event_level(const struct motion *m)
+{
+	return atomic_load(&m->src.flow_lvl);
 }
 
 int motion_load_program(struct motion *m, const char *text, size_t len)
@@ -1200,6 +1207,7 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	m->src.high = cfg->stream_high;
 	m->src.low = cfg->stream_low;
 	atomic_init(&m->src.flow, MOTION_FLOW_XON);
+	atomic_init(&m->src.flow_lvl, 0);
 	if (!m->src.buf ||
 	    ring_init(&m->q[Q_BLOCKS], sizeof(struct gc_block), cfg->q_blocks) ||
 	    /* segments are referred to by their slot until interpolation is

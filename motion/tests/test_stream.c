@@ -79,7 +79,9 @@ struct flowlog {
 static void flow_cb(void *user, enum motion_flow ev)
 {
 	struct flowlog *fl = user;
-	uint32_t lvl = motion_stream_level(fl->m);
+	/* the level that decided this event (the live one may already have
+	 * moved: the writer and the decoder run concurrently when threaded) */
+	uint32_t lvl = motion_stream_event_level(fl->m);
 
 	if (ev == MOTION_FLOW_XOFF) {
 		atomic_fetch_add(&fl->xoff, 1);

@@ -137,6 +137,9 @@ long motion_stream_write(struct motion *m, const char *data, size_t len);
 void motion_stream_end(struct motion *m); /* end of program text */
 enum motion_flow motion_stream_flow(const struct motion *m);
 uint32_t motion_stream_level(const struct motion *m);
+/* The stream level that decided the latest XOFF/XON: valid inside the flow
+ * callback (the live level may already have moved in threaded mode). */
+uint32_t motion_stream_event_level(const struct motion *m);
 /* ... or a whole program in memory (not copied; must outlive the run). */
 int motion_load_program(struct motion *m, const char *text, size_t len);
 
