@@ -4,11 +4,12 @@
 # emulated Zynq-7000 in QEMU, start servod, load and start the servo
 # firmware through the remoteproc sysfs, show the cycle running (trace log,
 # ampctl status/stats, parameters, a hang and its recovery), stop it and
-# shut down cleanly; then record a run into an MCAP file with plots
-# (build/demo/run.mcap, build/demo/plots/).
+# shut down cleanly; then run seed 004's squares-and-circles G-code program
+# through the motion pipeline while recording every cycle into an MCAP file
+# with plots (build/demo/run.mcap, build/demo/plots/).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"
 scripts/bootstrap.sh
 .venv/bin/python scripts/west_commands/emu.py --accel tcg,thread=single --script scripts/demo/guest-commands.sh "$@"
-exec scripts/demo/record.sh
+exec scripts/demo/record.sh --program
