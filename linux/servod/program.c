@@ -297,24 +297,31 @@ static double seg_dist(double px, double py, const struct hist_pt *a, const stru
 	return sqrt(dx * dx + dy * dy);
 }
 
+/* The servo cannot follow (why: 1 link lost, 2 safe stop): a running
+ * program ends in fault and the hold position is resynchronised from the
+ * next fresh feedback. */
+static void lose_servo(int m, int why)
+{
+	if (m == M_ARMED || m == M_RUN || m == M_STOPPING) {
+		atomic_store(&link_lost, why);
+		end_run(R_FAULT);
+	}
+	if (m != M_SINE) {
+		c.resync = 1;
+		c.have_hold = 0;
+	}
+}
+
 void prog_feedback(int rc, const struct amp_fb_record *fb, uint32_t n, int fresh)
 {
 	int m = atomic_load_explicit(&mode, memory_order_relaxed);
 	uint32_t s;
 
 	if (rc != AMP_OK) {
-		if (rc != AMP_E_PEER_ERROR) {
-			/* servo gone, stalled or restarting: a running program ends
-			 * and the next feedback resynchronises the hold position */
-			if (m == M_ARMED || m == M_RUN || m == M_STOPPING) {
-				atomic_store(&link_lost, 1);
-				end_run(R_FAULT);
-			}
-			if (m != M_SINE) {
-				c.resync = 1;
-				c.have_hold = 0;
-			}
-		}
+		/* servo gone, stalled or restarting: a running program ends
+		 * and the next feedback resynchronises the hold position */
+		if (rc != AMP_E_PEER_ERROR)
+			lose_servo(m, 1);
 		return;
 	}
 	if (!fresh)
@@ -322,14 +329,7 @@ void prog_feedback(int rc, const struct amp_fb_record *fb, uint32_t n, int fresh
 	for (uint32_t i = 0; i < n && i < AMP_MAX_AXES; i++)
 		c.act[i] = fb->axis[i].actual_pos;
 	if (n && (fb->axis[0].status_word & SP_AX_SAFESTOP)) {
-		if (m == M_ARMED || m == M_RUN || m == M_STOPPING) {
-			atomic_store(&link_lost, 2);
-			end_run(R_FAULT);
-		}
-		if (m != M_SINE) {
-			c.resync = 1;
-			c.have_hold = 0;
-		}
+		lose_servo(m, 2);
 		return;
 	}
 	if (c.resync) {
