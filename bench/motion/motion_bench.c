@@ -203,9 +203,14 @@ static int run_pool(struct motion_config c, const char *prog, unsigned workers,
 	double t0 = now_s(), c0 = cpu_s();
 	if (motion_start(m, workers))
 		return -1;
-	while (!motion_done(m)) {
-		struct timespec ts = { 0, 100000 };
-		nanosleep(&ts, NULL);
+	/* sleep until the sink has taken the last setpoint: a polling loop
+	 * here would wake every few hundred microseconds on a core that the
+	 * workers need */
+	if (motion_wait(m, 600000u) || motion_last_error(m)) {
+		fprintf(stderr, "pool run: %s\n", motion_last_error(m) ?
+			motion_last_error(m)->msg : "did not finish in 600 s");
+		motion_destroy(m);
+		return -1;
 	}
 	r->wall = now_s() - t0;
 	motion_stop(m);

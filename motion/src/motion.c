@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "internal.h"
 #include "motion/gcode.h"
@@ -148,7 +149,32 @@ struct motion {
 	bool underrun;
 	uint64_t sink_sum;
 	_Atomic uint64_t n_setpoints, n_underruns;
+
+	/* the end of the run, for motion_wait() */
+	_Alignas(CL) pthread_mutex_t end_lock;
+	pthread_cond_t end_cond;
+	atomic_int end_waiters;
 };
+
+static bool run_ended(const struct motion *m)
+{
+	return atomic_load(&m->faulted) || motion_done(m);
+}
+
+/* Wake motion_wait() callers if the run has ended.  Called after each
+ * change that can end it: the last setpoint taken (interp's end marker,
+ * a consumer's release) or a fault.  The fence pairs with the one in
+ * motion_wait(): either the waiter sees the change, or this sees the
+ * waiter (and then broadcasts under the lock the waiter sleeps on). */
+static void notify_end(struct motion *m)
+{
+	atomic_thread_fence(memory_order_seq_cst);
+	if (atomic_load(&m->end_waiters) == 0 || !run_ended(m))
+		return;
+	pthread_mutex_lock(&m->end_lock);
+	pthread_cond_broadcast(&m->end_cond);
+	pthread_mutex_unlock(&m->end_lock);
+}
 
 static inline const struct seg *seg_at(const struct motion *m, uint32_t pos)
 {
@@ -171,6 +197,7 @@ static void set_error(struct motion *m, enum motion_errcode code, uint32_t line,
 		atomic_store(&m->faulted, true);
 	}
 	pthread_mutex_unlock(&m->err_lock);
+	notify_end(m);
 }
 
 static void record_error(struct motion *m, const struct motion_error *e)
@@ -181,6 +208,7 @@ static void record_error(struct motion *m, const struct motion_error *e)
 		atomic_store(&m->faulted, true);
 	}
 	pthread_mutex_unlock(&m->err_lock);
+	notify_end(m);
 }
 
 /* ---- stream --------------------------------------------------------- */
@@ -975,6 +1003,7 @@ static uint32_t interp_run(void *arg, unsigned worker)
 			if (p->kind == SEG_END) {
 				ring_release(&m->q[Q_PROFILES]);
 				atomic_store(&m->interp_done, true);
+				notify_end(m);
 				done++;
 				continue;
 			}
@@ -1050,6 +1079,8 @@ static uint32_t sink_run(void *arg, unsigned worker)
 	if (done)
 		sp_unpack(m, last, &m->last);
 	atomic_fetch_add_explicit(&m->n_setpoints, done, memory_order_relaxed);
+	if (done)
+		notify_end(m);
 	return done;
 }
 
@@ -1198,6 +1229,15 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	m->na = cfg->n_axes;
 	m->ipm = cfg->increments_per_mm;
 	pthread_mutex_init(&m->err_lock, NULL);
+	pthread_mutex_init(&m->end_lock, NULL);
+	{
+		pthread_condattr_t ca;
+
+		pthread_condattr_init(&ca);
+		pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+		pthread_cond_init(&m->end_cond, &ca);
+		pthread_condattr_destroy(&ca);
+	}
 	pthread_mutex_init(&m->src.flow_lock, NULL);
 	while (size < cfg->stream_size)
 		size <<= 1;
@@ -1290,6 +1330,8 @@ void motion_destroy(struct motion *m)
 	free(m->bwd);
 	free(m->jl);
 	pthread_mutex_destroy(&m->err_lock);
+	pthread_mutex_destroy(&m->end_lock);
+	pthread_cond_destroy(&m->end_cond);
 	pthread_mutex_destroy(&m->src.flow_lock);
 	free(m);
 }
@@ -1367,8 +1409,10 @@ enum motion_status motion_next_setpoint(struct motion *m,
 		out->cycle = m->cycle++;
 		m->last = *out;
 		atomic_fetch_add_explicit(&m->n_setpoints, 1, memory_order_relaxed);
-		if (m->threaded)
+		if (m->threaded) {
 			sched_kick(m->sched);
+			notify_end(m);
+		}
 		return MOTION_ST_MOVING;
 	}
 	bool faulted = atomic_load(&m->faulted);
@@ -1394,6 +1438,34 @@ bool motion_done(const struct motion *m)
 {
 	return atomic_load(&m->interp_done) &&
 	       ring_count(&m->q[Q_SETPOINTS]) == 0;
+}
+
+int motion_wait(struct motion *m, uint32_t timeout_ms)
+{
+	struct timespec ts;
+	int rc = 0;
+
+	if (!m->threaded)
+		return -1;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	ts.tv_sec += (time_t)(timeout_ms / 1000u);
+	ts.tv_nsec += (long)(timeout_ms % 1000u) * 1000000L;
+	if (ts.tv_nsec >= 1000000000L) {
+		ts.tv_sec++;
+		ts.tv_nsec -= 1000000000L;
+	}
+	pthread_mutex_lock(&m->end_lock);
+	atomic_fetch_add(&m->end_waiters, 1);
+	atomic_thread_fence(memory_order_seq_cst); /* pairs with notify_end */
+	while (!run_ended(m) && rc == 0) {
+		if (timeout_ms == 0)
+			rc = pthread_cond_wait(&m->end_cond, &m->end_lock);
+		else
+			rc = pthread_cond_timedwait(&m->end_cond, &m->end_lock, &ts);
+	}
+	atomic_fetch_sub(&m->end_waiters, 1);
+	pthread_mutex_unlock(&m->end_lock);
+	return run_ended(m) ? 0 : -1;
 }
 
 void motion_get_stats(const struct motion *m, struct motion_stats *st)

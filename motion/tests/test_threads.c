@@ -75,11 +75,7 @@ static int threaded_checksum(struct motion_config c, const char *prog,
 	if (motion_create(&c, &m, &e) || motion_load_program(m, prog, strlen(prog)) ||
 	    motion_start(m, workers))
 		return -1;
-	uint64_t t0 = sched_now_us();
-	while (!motion_done(m) && sched_now_us() - t0 < 60000000u) {
-		struct timespec ts = { 0, 200000 };
-		nanosleep(&ts, NULL);
-	}
+	int wrc = motion_wait(m, 60000u);
 	motion_stop(m);
 	motion_get_stats(m, &s);
 	*sum = motion_sink_checksum(m);
@@ -92,7 +88,7 @@ static int threaded_checksum(struct motion_config c, const char *prog,
 	       c.policy == MOTION_POLICY_FIFO ? "fifo" : "hybrid", workers,
 	       (unsigned long long)*count, (unsigned long long)w[0],
 	       (unsigned long long)w[1]);
-	bool ok = motion_done(m) && !motion_last_error(m);
+	bool ok = wrc == 0 && motion_done(m) && !motion_last_error(m);
 	motion_destroy(m);
 	return ok ? 0 : -1;
 }
@@ -203,7 +199,66 @@ static int t_realtime_send(void)
 	return 0;
 }
 
+/* motion_wait(): returns when the run has ended (every setpoint taken, or a
+ * fault), on time-out without an end, and never in synchronous mode. */
+static int t_wait(void)
+{
+	struct motion_config c;
+	struct motion *m;
+	struct motion_error e;
+	struct motion_setpoint sp;
+	char *prog = gen_program(300);
+
+	CHECK(prog, "oom");
+	motion_config_default(&c);
+
+	/* synchronous mode: nothing to wait for */
+	CHECK(motion_create(&c, &m, &e) == 0, "create: %s", e.msg);
+	CHECK(motion_load_program(m, prog, strlen(prog)) == 0, "load");
+	CHECK(motion_wait(m, 10) == -1, "wait in synchronous mode must fail");
+	motion_destroy(m);
+
+	/* the sink takes every setpoint: wait returns once it has */
+	c.drain_sink = true;
+	CHECK(motion_create(&c, &m, &e) == 0, "create: %s", e.msg);
+	CHECK(motion_load_program(m, prog, strlen(prog)) == 0, "load");
+	CHECK(motion_start(m, 2) == 0, "start");
+	CHECK(motion_wait(m, 60000u) == 0, "no end within 60 s");
+	CHECK(motion_done(m) && !motion_last_error(m), "ended but not done");
+	motion_stop(m);
+	motion_destroy(m);
+
+	/* a stream that is never closed: the run cannot end, wait times out */
+	CHECK(motion_create(&c, &m, &e) == 0, "create: %s", e.msg);
+	CHECK(motion_stream_write(m, "G1 X1 F600\n", 11) == 11, "write");
+	CHECK(motion_start(m, 2) == 0, "start");
+	uint64_t t0 = sched_now_us();
+	CHECK(motion_wait(m, 50) == -1, "wait returned 0 on an open stream");
+	uint64_t dt = sched_now_us() - t0;
+	CHECK(dt >= 45000u, "timed out after %llu us, asked 50 ms",
+	      (unsigned long long)dt);
+	CHECK(!motion_done(m), "done with an open stream");
+	motion_stop(m);
+	motion_destroy(m);
+
+	/* a fault ends the run: wait returns and the error is there */
+	static const char bad[] = "G21 G90 F600\nG1 X1\nG1 X2 Q\nG1 X3\n";
+	CHECK(motion_create(&c, &m, &e) == 0, "create: %s", e.msg);
+	CHECK(motion_load_program(m, bad, strlen(bad)) == 0, "load");
+	CHECK(motion_start(m, 2) == 0, "start");
+	CHECK(motion_wait(m, 60000u) == 0, "no end after a fault within 60 s");
+	CHECK(motion_last_error(m) && motion_last_error(m)->line == 3,
+	      "expected the error on line 3");
+	motion_stop(m);
+	/* the consumer still gets safe setpoints */
+	(void)motion_next_setpoint(m, &sp);
+	motion_destroy(m);
+	free(prog);
+	return 0;
+}
+
 static const struct test_case cases[] = {
+	{ "wait", t_wait },
 	{ "drain_matches_sync", t_drain_matches_sync },
 	{ "realtime_send", t_realtime_send },
 };

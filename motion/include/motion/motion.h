@@ -158,7 +158,13 @@ enum motion_status motion_next_setpoint(struct motion *m,
 uint32_t motion_pump(struct motion *m, uint32_t max_jobs);
 
 const struct motion_error *motion_last_error(const struct motion *m);
+/* Every setpoint of the program has been produced and consumed. */
 bool motion_done(const struct motion *m);
+/* Threaded mode: block until the run has ended, that is motion_done() or
+ * a fault (motion_last_error()), for at most timeout_ms (0: no limit).
+ * Returns 0 when it has ended, -1 on timeout or in synchronous mode.
+ * The waiting thread sleeps: it takes no CPU time from the workers. */
+int motion_wait(struct motion *m, uint32_t timeout_ms);
 
 #define MOTION_N_QUEUES 6   /* stream, blocks, segments, planned, profiles, setpoints */
 #define MOTION_N_TASKS 8    /* 6 data tasks at most + 2 periodic */
