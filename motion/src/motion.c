@@ -1206,6 +1206,8 @@ static int check_config(const struct motion_config *c, struct motion_error *err)
 		return cfg_fail(err, "queue capacities too small", -1);
 	if (c->batch < 1 || c->batch > 4096)
 		return cfg_fail(err, "batch must be 1..4096", -1);
+	if (c->min_job > 4096)
+		return cfg_fail(err, "min_job must be 0..4096", -1);
 	return 0;
 }
 
@@ -1303,6 +1305,7 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	if (!m->sched)
 		goto nomem;
 	sched_set_sampler(m->sched, MOTION_N_QUEUES, queue_names, sample_levels, m);
+	sched_set_min_job(m->sched, cfg->min_job ? cfg->min_job : cfg->batch);
 	*out = m;
 	return 0;
 nomem:

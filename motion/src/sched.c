@@ -59,6 +59,31 @@ struct sched_choice sched_decide(enum motion_policy policy,
 	return c;
 }
 
+void sched_gate(struct sched_dstate *d, size_t nd, uint32_t min_job)
+{
+	if (min_job <= 1)
+		return;
+	for (size_t i = 0; i < nd; i++) {
+		int up = -1, dn = -1;
+
+		if (d[i].running)
+			continue;
+		for (size_t k = 0; k < nd; k++) {
+			if (d[k].order < d[i].order &&
+			    (up < 0 || d[k].order > d[up].order))
+				up = (int)k;
+			if (d[k].order > d[i].order &&
+			    (dn < 0 || d[k].order < d[dn].order))
+				dn = (int)k;
+		}
+		if (up >= 0 && d[up].running && d[i].ul < min_job)
+			d[i].ul = 0;
+		if (dn >= 0 && d[dn].running && d[i].dl < d[i].dcap &&
+		    d[i].dcap - d[i].dl < min_job)
+			d[i].dl = d[i].dcap;
+	}
+}
+
 static uint64_t now_ns(void)
 {
 	struct timespec ts;
@@ -111,6 +136,7 @@ struct sched {
 	uint64_t life_ns[SCHED_MAX_WORKERS];
 	uint64_t seq;
 	uint64_t t0;
+	uint32_t min_job;
 	/* trace */
 	unsigned nlevels;
 	const char *level_name[SCHED_MAX_LEVELS];
@@ -191,6 +217,13 @@ void sched_destroy(struct sched *s)
 	free(s);
 }
 
+void sched_set_min_job(struct sched *s, uint32_t min_job)
+{
+	pthread_mutex_lock(&s->lock);
+	s->min_job = min_job;
+	pthread_mutex_unlock(&s->lock);
+}
+
 void sched_set_sampler(struct sched *s, unsigned n, const char *const *names,
 		       sched_sample_fn fn, void *arg)
 {
@@ -260,6 +293,7 @@ static struct sched_choice decide_locked(struct sched *s, uint64_t now)
 		if (!t->running)
 			t->d.levels(t->d.arg, &ds[i].ul, &ds[i].dl, &ds[i].dcap);
 	}
+	sched_gate(ds, s->nd, s->min_job);
 	return sched_decide(s->policy, ps, s->np, ds, s->nd);
 }
 

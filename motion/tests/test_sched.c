@@ -359,7 +359,133 @@ static int t_seed003_growth_and_caps(void)
 	return 0;
 }
 
+static bool eligible(const struct sched_dstate *d)
+{
+	return !d->running && d->ul > 0 && d->dl < d->dcap;
+}
+
+/* Whole jobs (sched_gate): explicit cases. */
+static int t_gate_whole_jobs(void)
+{
+	/* array order is not chain order: 18 is downstream of 17 */
+	struct sched_dstate d[3] = { D(18, 2, 0, 10, false), D(16, 9, 0, 10, true),
+				     D(17, 3, 7, 10, false) };
+	struct sched_dstate g[3];
+
+	for (uint32_t mj = 0; mj <= 1; mj++) { /* off: rule 2 as written */
+		memcpy(g, d, sizeof(d));
+		sched_gate(g, 3, mj);
+		CHECK(memcmp(g, d, sizeof(d)) == 0, "min_job %u changed the snapshot", mj);
+	}
+	memcpy(g, d, sizeof(d));
+	sched_gate(g, 3, 4);
+	/* 17: its producer 16 runs and only 3 < 4 items wait: held back */
+	CHECK(!eligible(&g[2]), "17 should wait for a whole job");
+	/* 18: its producer 17 is not running: 2 items are enough */
+	CHECK(eligible(&g[0]) && g[0].ul == 2, "18 should run");
+	CHECK(g[1].running && g[1].ul == 9, "a running task is left alone");
+	g[2] = d[2];
+	g[2].ul = 4;
+	sched_gate(g, 3, 4);
+	CHECK(eligible(&g[2]) && g[2].ul == 4, "a whole job upstream: 17 may run");
+
+	/* room: 17's consumer 18 runs and only 10 - 7 = 3 < 4 slots are free */
+	struct sched_dstate e[3] = { D(16, 9, 0, 10, false), D(17, 8, 7, 10, false),
+				     D(18, 5, 0, 10, true) };
+	memcpy(g, e, sizeof(e));
+	sched_gate(g, 3, 4);
+	CHECK(!eligible(&g[1]), "17 should wait for room for a whole job");
+	CHECK(eligible(&g[0]), "16 has room and no running producer");
+	g[1] = e[1];
+	g[1].dl = 6;
+	sched_gate(g, 3, 4);
+	CHECK(eligible(&g[1]), "room for a whole job: 17 may run");
+	/* the decision then follows the four rules on what is left */
+	memcpy(g, e, sizeof(e));
+	sched_gate(g, 3, 4);
+	struct sched_choice c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, g, 3);
+	CHECK(c.kind == SCHED_DATA && c.index == 0, "got %d/%d", c.kind, c.index);
+	return 0;
+}
+
+/* Whole jobs: properties over random snapshots, with the neighbours found
+ * by sorting on O (a different way than sched_gate's). */
+static int t_gate_random(void)
+{
+	uint32_t s = 77;
+	unsigned held = 0;
+
+#define R(n) ((s = s * 1664525u + 1013904223u) >> 8) % (n)
+	for (int it = 0; it < 200000; it++) {
+		struct sched_dstate d[8], g[8];
+		size_t nd = 1 + R(8);
+		uint32_t mj = R(8);
+		uint8_t orders[8] = { 16, 17, 18, 19, 20, 21, 22, 23 };
+		bool any_running = false;
+
+		for (size_t i = 0; i < 8; i++) {
+			size_t j = R(8);
+			uint8_t t = orders[i];
+			orders[i] = orders[j];
+			orders[j] = t;
+		}
+		for (size_t i = 0; i < nd; i++) {
+			d[i].order = orders[i];
+			d[i].dcap = 1 + R(10);
+			d[i].ul = R(12);
+			d[i].dl = R(d[i].dcap + 1);
+			d[i].running = R(3) == 0;
+			d[i].last = 0;
+			any_running |= d[i].running;
+		}
+		/* chain order */
+		size_t idx[8];
+		for (size_t i = 0; i < nd; i++)
+			idx[i] = i;
+		for (size_t i = 1; i < nd; i++)
+			for (size_t k = i; k > 0 && d[idx[k - 1]].order > d[idx[k]].order; k--) {
+				size_t t = idx[k];
+				idx[k] = idx[k - 1];
+				idx[k - 1] = t;
+			}
+		memcpy(g, d, sizeof(d));
+		sched_gate(g, nd, mj);
+		bool any_before = false, any_after = false;
+		for (size_t r = 0; r < nd; r++) {
+			size_t i = idx[r];
+			bool up_run = r > 0 && d[idx[r - 1]].running;
+			bool dn_run = r + 1 < nd && d[idx[r + 1]].running;
+			bool held_now = eligible(&d[i]) && mj > 1 &&
+					((up_run && d[i].ul < mj) ||
+					 (dn_run && d[i].dcap - d[i].dl < mj));
+			any_before |= eligible(&d[i]);
+			any_after |= eligible(&g[i]);
+			held += held_now;
+			CHECK(g[i].order == d[i].order && g[i].running == d[i].running &&
+			      g[i].dcap == d[i].dcap, "identity changed");
+			CHECK(eligible(&g[i]) == (eligible(&d[i]) && !held_now),
+			      "task %zu (O %u, ul %u, dl %u/%u, min_job %u, neighbours running %d/%d): eligible %d -> %d",
+			      i, d[i].order, d[i].ul, d[i].dl, d[i].dcap, mj, up_run, dn_run,
+			      eligible(&d[i]), eligible(&g[i]));
+			if (eligible(&g[i]))
+				CHECK(g[i].ul == d[i].ul && g[i].dl == d[i].dl,
+				      "levels of an eligible task changed");
+		}
+		if (!any_running)
+			CHECK(memcmp(g, d, nd * sizeof(d[0])) == 0,
+			      "nothing runs, yet the gate changed the snapshot");
+		/* liveness: something eligible before -> eligible after, or a
+		 * job is running whose end lets it go */
+		CHECK(!any_before || any_after || any_running, "gate stalled the pool");
+	}
+#undef R
+	CHECK(held > 1000, "only %u tasks held: the test does not exercise the gate", held);
+	return 0;
+}
+
 static const struct test_case cases[] = {
+	{ "gate_whole_jobs", t_gate_whole_jobs },
+	{ "gate_random", t_gate_random },
 	{ "periodic_wins", t_periodic_wins },
 	{ "rule1_running", t_rule1_running },
 	{ "rule2_data_and_room", t_rule2_data_and_room },

@@ -12,14 +12,17 @@ def test_bench_tiny_writes_json(tmp_path: Path) -> None:
     b = require("host")
     out = tmp_path / "motion.json"
     proc = run_binary(b, "motion_bench",
-                      ["--blocks", "300", "--arcs", "200", "--reps", "1", "--json", str(out)])
+                      ["--blocks", "300", "--arcs", "200", "--reps", "1", "--chord", "1",
+                       "--json", str(out)])
     assert proc.returncode == 0, proc.stdout + proc.stderr
     data = json.loads(out.read_text())
     single = data["single_thread"]
     assert single["blocks"] > 0 and single["blocks_per_s"] > 0
     sched = data["scheduler"]
-    for key in ("hybrid_1", "hybrid_n", "fifo_1", "fifo_n"):
+    assert sched["program"] == "short arcs, chord tolerance 1 um"
+    for key in ("hybrid_1", "hybrid_n", "fifo_1", "fifo_n", "hybrid_n_rule2"):
         assert sched[key]["wall_s"] > 0
     assert sched["speedup_hybrid_n_over_1"] > 0
+    assert sched["speedup_hybrid_rule2_as_written_n_over_1"] > 0
     assert abs(sum(sched["task_time_share"].values()) - 1.0) < 1e-3
     assert "blocks/s" in proc.stdout

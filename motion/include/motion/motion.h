@@ -108,6 +108,11 @@ struct motion_config {
 	/* queue capacities (items) */
 	uint32_t q_blocks, q_segments, q_planned, q_profiles, q_setpoints;
 	uint32_t batch;            /* items per task job (8) */
+	uint32_t min_job;          /* whole jobs: while a neighbour task runs,
+				      a task waits for this many items
+				      upstream / this much room downstream
+				      (0: batch; 1: off, seed 003's rule 2
+				      as written); see sched_gate() */
 	enum motion_policy policy;
 	/* threaded mode: optional periodic "position send" task run by the
 	 * worker pool at period_us; it calls motion_next_setpoint() and hands

@@ -56,6 +56,19 @@ struct sched_choice sched_decide(enum motion_policy policy,
 				 const struct sched_pstate *p, size_t np,
 				 const struct sched_dstate *d, size_t nd);
 
+/* Whole jobs, a refinement of rule 2 (pure, applied to the snapshot before
+ * sched_decide()).  While a task's upstream neighbour (next smaller O) is
+ * running, "its upstream queue has data" means at least min_job items;
+ * while its downstream neighbour is running, "its downstream queue has
+ * room" means room for at least min_job items.  Otherwise rule 2 is
+ * unchanged, so with no task running (one worker) it changes nothing, and
+ * a task it holds back always has a running neighbour that will end its
+ * job and let it go.  Without it, a worker left with little to do keeps
+ * taking a few items right behind (or ahead of) the task running on the
+ * other core, and those micro-jobs cost more than they do (see
+ * docs/motion.md).  min_job <= 1 is rule 2 as written. */
+void sched_gate(struct sched_dstate *d, size_t nd, uint32_t min_job);
+
 /* A job processes a bounded amount of work; returns the items it handled. */
 typedef uint32_t (*sched_job_fn)(void *arg, unsigned worker);
 typedef void (*sched_levels_fn)(void *arg, uint32_t *ul, uint32_t *dl,
@@ -79,6 +92,8 @@ struct sched *sched_create(enum motion_policy policy,
 			   const struct sched_task_desc *tasks, size_t n,
 			   uint32_t trace_samples);
 void sched_destroy(struct sched *s);
+/* Whole jobs (see sched_gate()); 0 or 1: off (the default). */
+void sched_set_min_job(struct sched *s, uint32_t min_job);
 
 /* Queue-level sampler for the trace (levels of n queues). */
 void sched_set_sampler(struct sched *s, unsigned n, const char *const *names,
