@@ -1369,7 +1369,7 @@ uint32_t motion_pump(struct motion *m, uint32_t max_jobs)
 		return 0;
 	while (n < max_jobs) {
 		struct sched_choice c = sched_step(m->sched);
-		if (c.kind == SCHED_IDLE)
+		if (c.kind == SCHED_CHOICE_IDLE)
 			break;
 		n++;
 	}
@@ -1396,7 +1396,7 @@ enum motion_status motion_next_setpoint(struct motion *m,
 	if (!m->threaded) {
 		while (ring_count(q) == 0) {
 			struct sched_choice c = sched_step(m->sched);
-			if (c.kind == SCHED_IDLE)
+			if (c.kind == SCHED_CHOICE_IDLE)
 				break;
 		}
 		if (m->cfg.trace_samples) {

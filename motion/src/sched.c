@@ -13,7 +13,7 @@ struct sched_choice sched_decide(enum motion_policy policy,
 				 const struct sched_pstate *p, size_t np,
 				 const struct sched_dstate *d, size_t nd)
 {
-	struct sched_choice c = { SCHED_IDLE, -1 };
+	struct sched_choice c = { SCHED_CHOICE_IDLE, -1 };
 	int best = -1;
 
 	/* A ready periodic task always wins: highest priority (lowest P),
@@ -25,7 +25,7 @@ struct sched_choice sched_decide(enum motion_policy policy,
 			best = (int)i;
 	}
 	if (best >= 0) {
-		c.kind = SCHED_PERIODIC;
+		c.kind = SCHED_CHOICE_PERIODIC;
 		c.index = best;
 		return c;
 	}
@@ -53,7 +53,7 @@ struct sched_choice sched_decide(enum motion_policy policy,
 			best = (int)i;
 	}
 	if (best >= 0) {
-		c.kind = SCHED_DATA;
+		c.kind = SCHED_CHOICE_DATA;
 		c.index = best;
 	}
 	return c;
@@ -302,7 +302,7 @@ static int claim_locked(struct sched *s, struct sched_choice c, uint64_t now)
 {
 	int ti;
 
-	if (c.kind == SCHED_PERIODIC) {
+	if (c.kind == SCHED_CHOICE_PERIODIC) {
 		ti = s->pidx[c.index];
 		struct task *t = &s->t[ti];
 		t->next_release += t->d.period_us;
@@ -338,7 +338,7 @@ struct sched_choice sched_step(struct sched *s)
 
 	pthread_mutex_lock(&s->lock);
 	c = decide_locked(s, now);
-	if (c.kind == SCHED_IDLE) {
+	if (c.kind == SCHED_CHOICE_IDLE) {
 		s->idle[0]++;
 		pthread_mutex_unlock(&s->lock);
 		return c;
@@ -389,7 +389,7 @@ static void *worker_main(void *arg)
 		atomic_thread_fence(memory_order_seq_cst);
 		uint64_t now = sched_now_us();
 		struct sched_choice c = decide_locked(s, now);
-		if (c.kind == SCHED_IDLE) {
+		if (c.kind == SCHED_CHOICE_IDLE) {
 			uint64_t wake = next_release_locked(s);
 			if (wake > now + 2000u)
 				wake = now + 2000u; /* safety poll */

@@ -24,15 +24,15 @@ static int t_periodic_wins(void)
 	struct sched_dstate d[1] = { D(16, 100, 0, 10, false) };
 	struct sched_choice c = sched_decide(MOTION_POLICY_HYBRID, p, 3, d, 1);
 
-	CHECK(c.kind == SCHED_PERIODIC && c.index == 1, "got %d/%d", c.kind, c.index);
+	CHECK(c.kind == SCHED_CHOICE_PERIODIC && c.index == 1, "got %d/%d", c.kind, c.index);
 	p[1].running = true; /* a running periodic task is not dispatched twice */
 	c = sched_decide(MOTION_POLICY_HYBRID, p, 3, d, 1);
-	CHECK(c.kind == SCHED_PERIODIC && c.index == 0, "got %d/%d", c.kind, c.index);
+	CHECK(c.kind == SCHED_CHOICE_PERIODIC && c.index == 0, "got %d/%d", c.kind, c.index);
 	p[0].ready = false;
 	c = sched_decide(MOTION_POLICY_HYBRID, p, 3, d, 1);
-	CHECK(c.kind == SCHED_DATA && c.index == 0, "data expected");
+	CHECK(c.kind == SCHED_CHOICE_DATA && c.index == 0, "data expected");
 	c = sched_decide(MOTION_POLICY_FIFO, p, 0, d, 0);
-	CHECK(c.kind == SCHED_IDLE && c.index == -1, "idle expected");
+	CHECK(c.kind == SCHED_CHOICE_IDLE && c.index == -1, "idle expected");
 	return 0;
 }
 
@@ -41,10 +41,10 @@ static int t_rule1_running(void)
 	struct sched_dstate d[2] = { D(16, 50, 0, 10, true), D(17, 3, 0, 10, false) };
 	struct sched_choice c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, d, 2);
 
-	CHECK(c.kind == SCHED_DATA && c.index == 1, "running task chosen");
+	CHECK(c.kind == SCHED_CHOICE_DATA && c.index == 1, "running task chosen");
 	d[1].running = true;
 	c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, d, 2);
-	CHECK(c.kind == SCHED_IDLE, "expected idle");
+	CHECK(c.kind == SCHED_CHOICE_IDLE, "expected idle");
 	return 0;
 }
 
@@ -55,10 +55,10 @@ static int t_rule2_data_and_room(void)
 				     D(18, 1, 9, 10, false) };
 	struct sched_choice c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, d, 3);
 
-	CHECK(c.kind == SCHED_DATA && c.index == 2, "got %d/%d", c.kind, c.index);
+	CHECK(c.kind == SCHED_CHOICE_DATA && c.index == 2, "got %d/%d", c.kind, c.index);
 	d[2].ul = 0;
 	c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, d, 3);
-	CHECK(c.kind == SCHED_IDLE, "expected idle");
+	CHECK(c.kind == SCHED_CHOICE_IDLE, "expected idle");
 	return 0;
 }
 
@@ -68,11 +68,11 @@ static int t_rule3_largest_difference(void)
 				     D(18, 8, 0, 10, false), D(19, 2, 0, 10, false) };
 	struct sched_choice c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, d, 4);
 
-	CHECK(c.kind == SCHED_DATA && c.index == 1, "got index %d, want 1", c.index);
+	CHECK(c.kind == SCHED_CHOICE_DATA && c.index == 1, "got index %d, want 1", c.index);
 	/* negative differences compare too */
 	struct sched_dstate e[2] = { D(16, 2, 9, 10, false), D(17, 1, 5, 10, false) };
 	c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, e, 2);
-	CHECK(c.kind == SCHED_DATA && c.index == 1, "got index %d, want 1", c.index);
+	CHECK(c.kind == SCHED_CHOICE_DATA && c.index == 1, "got index %d, want 1", c.index);
 	return 0;
 }
 
@@ -83,7 +83,7 @@ static int t_rule4_tie_upstream(void)
 				     D(18, 4, 0, 10, false) };
 	struct sched_choice c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, d, 3);
 
-	CHECK(c.kind == SCHED_DATA && c.index == 1, "got index %d, want 1", c.index);
+	CHECK(c.kind == SCHED_CHOICE_DATA && c.index == 1, "got index %d, want 1", c.index);
 	return 0;
 }
 
@@ -95,7 +95,7 @@ static int t_fifo_policy(void)
 	d[1].last = 7;
 	d[2].last = 8;
 	struct sched_choice c = sched_decide(MOTION_POLICY_FIFO, NULL, 0, d, 3);
-	CHECK(c.kind == SCHED_DATA && c.index == 1, "FIFO picked %d", c.index);
+	CHECK(c.kind == SCHED_CHOICE_DATA && c.index == 1, "FIFO picked %d", c.index);
 	return 0;
 }
 
@@ -104,18 +104,18 @@ static int t_fifo_policy(void)
 static struct sched_choice reference(const struct sched_pstate *p, size_t np,
 				     const struct sched_dstate *d, size_t nd)
 {
-	struct sched_choice c = { SCHED_IDLE, -1 };
+	struct sched_choice c = { SCHED_CHOICE_IDLE, -1 };
 	long best = -1;
 
 	for (size_t i = 0; i < np; i++) {
 		long score = p[i].ready && !p[i].running ? 1000 - p[i].prio : -1;
 		if (score > best) {
 			best = score;
-			c.kind = SCHED_PERIODIC;
+			c.kind = SCHED_CHOICE_PERIODIC;
 			c.index = (int)i;
 		}
 	}
-	if (c.kind == SCHED_PERIODIC)
+	if (c.kind == SCHED_CHOICE_PERIODIC)
 		return c;
 	long long bs = 0;
 	for (size_t i = 0; i < nd; i++) {
@@ -125,9 +125,9 @@ static struct sched_choice reference(const struct sched_pstate *p, size_t np,
 		/* difference first, then smaller order: one key */
 		long long key = ((long long)d[i].ul - (long long)d[i].dl) * 1024 +
 				(255 - d[i].order);
-		if (c.kind == SCHED_IDLE || key > bs) {
+		if (c.kind == SCHED_CHOICE_IDLE || key > bs) {
 			bs = key;
-			c.kind = SCHED_DATA;
+			c.kind = SCHED_CHOICE_DATA;
 			c.index = (int)i;
 		}
 	}
@@ -280,7 +280,7 @@ static int run_chain(enum motion_policy pol, uint32_t cap, const uint32_t *growt
 	for (;;) {
 		struct sched_choice ch = sched_step(s);
 		sched_sample(s);
-		if (ch.kind == SCHED_IDLE)
+		if (ch.kind == SCHED_CHOICE_IDLE)
 			break;
 		steps++;
 		/* after warm-up (the first item reached the end), and while
@@ -404,7 +404,7 @@ static int t_gate_whole_jobs(void)
 	memcpy(g, e, sizeof(e));
 	sched_gate(g, 3, 4);
 	struct sched_choice c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0, g, 3);
-	CHECK(c.kind == SCHED_DATA && c.index == 0, "got %d/%d", c.kind, c.index);
+	CHECK(c.kind == SCHED_CHOICE_DATA && c.index == 0, "got %d/%d", c.kind, c.index);
 	return 0;
 }
 

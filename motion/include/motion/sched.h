@@ -44,7 +44,7 @@ struct sched_dstate {
 	uint64_t last;   /* dispatch sequence of its last run (FIFO policy) */
 };
 
-enum sched_kind { SCHED_IDLE = 0, SCHED_PERIODIC, SCHED_DATA };
+enum sched_kind { SCHED_CHOICE_IDLE = 0, SCHED_CHOICE_PERIODIC, SCHED_CHOICE_DATA };
 
 struct sched_choice {
 	enum sched_kind kind;
