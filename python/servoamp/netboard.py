@@ -27,8 +27,11 @@ from typing import Any, Sequence
 from servoamp import qemu
 from servoamp import telemetry as tw
 
+# The board's network entry (boards/zynq7000_qemu/board.yaml) holds the
+# same values; tests/robot/test_board_contract.py checks that they agree.
 TELEMETRY_PORT = 7700
 GUEST_ADDR = "10.0.2.15/24"
+NIC_MODEL = "cadence_gem"
 SERVOD_LOG = "/tmp/servod.log"
 RPROC = "/sys/class/remoteproc/remoteproc0"
 
@@ -40,10 +43,10 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def nic_args(host_port: int, guest_port: int = TELEMETRY_PORT) -> list[str]:
+def nic_args(host_port: int, guest_port: int = TELEMETRY_PORT, model: str = NIC_MODEL) -> list[str]:
     """QEMU arguments: gem0 on user networking, host 127.0.0.1:host_port
     forwarded to the guest's guest_port."""
-    return ["-nic", f"user,model=cadence_gem,hostfwd=tcp:127.0.0.1:{host_port}-:{guest_port}"]
+    return ["-nic", f"user,model={model},hostfwd=tcp:127.0.0.1:{host_port}-:{guest_port}"]
 
 
 def _log(msg: str) -> None:

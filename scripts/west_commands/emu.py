@@ -4,6 +4,8 @@
     west emu -c 'cat /proc/cpuinfo'  # scripted: boot, run, print, quit
     west emu --script cmds.sh        # scripted, one shell command a line
     west emu --build-only            # just build/refresh the images
+    west emu --net                   # with guest networking (eth0 up, servod's
+                                     # telemetry port forwarded to 127.0.0.1)
 
 What it builds (each step is cached and costs about a second when nothing
 changed): the kernel (linux/kernel/build.sh, cached by source version +
@@ -15,6 +17,12 @@ Interactive mode: UART0 (the Linux console) and the QEMU monitor share this
 terminal (Ctrl-A c switches to the monitor, Ctrl-A x quits); UART1 (the
 servo core's console) goes to a log file. Scripted mode: UARTs on sockets
 bound to 127.0.0.1, the monitor on QMP; exits non-zero when a command fails.
+
+--net [PORT]: gem0 on QEMU user networking, with the host's 127.0.0.1:PORT
+(a free port when PORT is left out) forwarded to the guest's telemetry port
+(board.yaml "network"). Scripted mode brings eth0 up first (servoamp-net);
+interactive mode prints the command to do it. Then `servod` in the guest
+and `servoamp record --port PORT` on the host record the controller.
 
 Also runs without a west workspace: ``.venv/bin/python scripts/west_commands/emu.py``.
 """
@@ -29,7 +37,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "python"))
 
-from servoamp import qemu  # noqa: E402
+from servoamp import netboard, qemu  # noqa: E402
 
 DESCRIPTION = "build what is missing and boot the emulated board (QEMU)"
 
@@ -49,7 +57,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--timeout", type=float, default=60.0, help="seconds per boot or command in scripted mode")
     parser.add_argument("--keep-logs", action="store_true", help="keep build/qemu/<run>/ (UART logs) even on success")
     parser.add_argument("--build-only", action="store_true", help="build the images, do not boot")
+    parser.add_argument("--net", nargs="?", type=int, const=0, default=None, metavar="PORT",
+                        help="guest networking: forward 127.0.0.1:PORT (default: a free port) to the "
+                             "guest's telemetry port; scripted mode brings eth0 up first")
     return parser
+
+
+def net_args(board: qemu.Board, port: int | None) -> tuple[list[str], int | None]:
+    """QEMU arguments for --net, and the host port (None without --net)."""
+    if port is None:
+        return [], None
+    if not 0 <= port <= 65535:
+        raise qemu.QemuError(f"--net: port {port} is not a TCP port")
+    net = board.data["network"]
+    host_port = port or netboard.free_port()
+    print(f"[emu] network: {net['nic']} (eth0, {net['guest_addr']}), "
+          f"host 127.0.0.1:{host_port} -> guest :{net['telemetry_port']}")
+    return netboard.nic_args(host_port, int(net["telemetry_port"]), str(net["nic"])), host_port
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,14 +90,18 @@ def run(args: argparse.Namespace) -> int:
     commands = list(args.command)
     if args.script:
         commands += [ln for ln in args.script.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    nic, host_port = net_args(board, args.net)
     if not commands:
+        if host_port is not None:
+            print(f"[emu] in the guest, bring eth0 up with: servoamp-net {board.data['network']['guest_addr']}")
         return qemu.interactive(board, images, accel=args.accel,
-                                extra_args=["-icount", args.icount] if args.icount else [])
-    return scripted(board, images, commands, args)
+                                extra_args=(["-icount", args.icount] if args.icount else []) + nic)
+    return scripted(board, images, commands, args, nic)
 
 
-def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: argparse.Namespace) -> int:
-    extra = ["-icount", args.icount] if args.icount else []
+def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: argparse.Namespace,
+             nic: list[str] | None = None) -> int:
+    extra = (["-icount", args.icount] if args.icount else []) + list(nic or [])
     machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs, extra_args=extra)
     failed = 0
     with machine:
@@ -82,6 +110,14 @@ def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: 
               f"userspace at {times.guest_userspace:.2f} s guest uptime)")
         console = machine.uart(0)
         prompt = str(board.data["linux"]["prompt"])
+        if nic:
+            net_up = f"servoamp-net {board.data['network']['guest_addr']}"
+            rc, out = qemu.run_shell(console, net_up, prompt, timeout=args.timeout)
+            print(f"$ {net_up}\n{out}")
+            if rc or "carrier 1" not in out:
+                print("[emu] guest network not up")
+                machine.mark_failed()
+                return 1
         for cmd in commands:
             rc, out = qemu.run_shell(console, cmd, prompt, timeout=args.timeout)
             print(f"$ {cmd}")

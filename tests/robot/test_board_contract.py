@@ -85,3 +85,17 @@ def test_driver_builds_without_warnings(tmp_path: Path) -> None:
     assert res.returncode == 0, res.stdout + res.stderr
     assert "warning" not in (res.stdout + res.stderr).lower(), res.stdout + res.stderr
     assert (tmp_path / "zynq_servo_rproc.ko").exists()
+
+
+def test_network_entry_agrees(board: qemu.Board) -> None:
+    """board.yaml's network entry, the Python launcher's defaults and the
+    telemetry library's default port are the same numbers."""
+    from servoamp import netboard
+
+    net = board.data["network"]
+    assert net["nic"] == netboard.NIC_MODEL
+    assert net["guest_addr"] == netboard.GUEST_ADDR
+    assert net["telemetry_port"] == netboard.TELEMETRY_PORT
+    header = (REPO / "linux" / "telemetry" / "telem.h").read_text()
+    m = re.search(r"#define TELEM_DEFAULT_PORT (\d+)u", header)
+    assert m and int(m.group(1)) == net["telemetry_port"]

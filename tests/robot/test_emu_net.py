@@ -1,0 +1,50 @@
+"""``west emu --net`` end to end: boot with guest networking, bring eth0 up,
+and reach a server in the guest through the host forward on 127.0.0.1."""
+from __future__ import annotations
+
+import secrets
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from servoamp import netboard, qemu
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_emu_net_forwards_the_telemetry_port(images: qemu.Images) -> None:
+    board = qemu.Board.load("zynq7000_qemu")
+    port = netboard.free_port()
+    token = f"emu-net-{secrets.token_hex(4)}"
+    guest_port = board.data["network"]["telemetry_port"]
+    # the guest answers one connection on the telemetry port, then the
+    # scripted run ends
+    cmd = [sys.executable, str(REPO / "scripts" / "west_commands" / "emu.py"),
+           "--accel", "tcg,thread=single", "--net", str(port), "--timeout", "90",
+           "-c", f"echo {token} | nc -l -p {guest_port}"]
+    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    got = b""
+    try:
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline and proc.poll() is None and token.encode() not in got:
+            try:
+                with socket.create_connection(("127.0.0.1", port), timeout=2) as s:
+                    s.settimeout(5)
+                    got = b""
+                    while chunk := s.recv(256):
+                        got += chunk
+            except OSError:
+                pass
+            if token.encode() not in got:
+                time.sleep(0.5)
+        out, _ = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert token.encode() in got, f"nothing from the guest through 127.0.0.1:{port}\n{out[-3000:]}"
+    assert proc.returncode == 0, out[-3000:]
+    assert f"host 127.0.0.1:{port} -> guest :{guest_port}" in out
+    assert "carrier 1" in out
