@@ -134,12 +134,43 @@ static struct sched_choice reference(const struct sched_pstate *p, size_t np,
 	return c;
 }
 
+/* Linear congruential generator of the randomized tests (reproducible). */
+static uint32_t rnd(uint32_t *s, uint32_t n)
+{
+	*s = *s * 1664525u + 1013904223u;
+	return (*s >> 8) % n;
+}
+
+/* nd random data-task states at distinct chain positions (16..23, in
+ * shuffled array order): capacity 1..cap_max, UL below ul_lim, running one
+ * time in run_one_in. */
+static void random_dstates(struct sched_dstate *d, size_t nd, uint32_t *s,
+			   uint32_t cap_max, uint32_t ul_lim, uint32_t run_one_in)
+{
+	uint8_t orders[8] = { 16, 17, 18, 19, 20, 21, 22, 23 };
+
+	for (size_t i = 0; i < 8; i++) { /* shuffle chain positions */
+		size_t j = rnd(s, 8);
+		uint8_t t = orders[i];
+		orders[i] = orders[j];
+		orders[j] = t;
+	}
+	for (size_t i = 0; i < nd; i++) {
+		d[i].order = orders[i];
+		d[i].dcap = 1 + rnd(s, cap_max);
+		d[i].ul = rnd(s, ul_lim);
+		d[i].dl = rnd(s, d[i].dcap + 1);
+		d[i].running = rnd(s, run_one_in) == 0;
+		d[i].last = rnd(s, 100);
+	}
+}
+
 static int t_random_vs_reference(void)
 {
 	uint32_t s = 2024;
 	int mismatches = 0;
 
-#define R(n) ((s = s * 1664525u + 1013904223u) >> 8) % (n)
+#define R(n) rnd(&s, (n))
 	for (int it = 0; it < 200000; it++) {
 		struct sched_pstate p[3];
 		struct sched_dstate d[8];
@@ -149,21 +180,7 @@ static int t_random_vs_reference(void)
 			p[i].ready = R(4) == 0;
 			p[i].running = R(4) == 0;
 		}
-		uint8_t orders[8] = { 16, 17, 18, 19, 20, 21, 22, 23 };
-		for (size_t i = 0; i < 8; i++) { /* shuffle chain positions */
-			size_t j = R(8);
-			uint8_t t = orders[i];
-			orders[i] = orders[j];
-			orders[j] = t;
-		}
-		for (size_t i = 0; i < nd; i++) {
-			d[i].order = orders[i];
-			d[i].dcap = 1 + R(8);
-			d[i].ul = R(10);
-			d[i].dl = R(d[i].dcap + 1);
-			d[i].running = R(5) == 0;
-			d[i].last = R(100);
-		}
+		random_dstates(d, nd, &s, 8, 10, 5);
 		struct sched_choice a = sched_decide(MOTION_POLICY_HYBRID, p, np, d, nd);
 		struct sched_choice b = reference(p, np, d, nd);
 		/* equal-priority periodic ties: both take the lowest index */
@@ -415,29 +432,15 @@ static int t_gate_random(void)
 	uint32_t s = 77;
 	unsigned held = 0;
 
-#define R(n) ((s = s * 1664525u + 1013904223u) >> 8) % (n)
 	for (int it = 0; it < 200000; it++) {
 		struct sched_dstate d[8], g[8];
-		size_t nd = 1 + R(8);
-		uint32_t mj = R(8);
-		uint8_t orders[8] = { 16, 17, 18, 19, 20, 21, 22, 23 };
+		size_t nd = 1 + rnd(&s, 8);
+		uint32_t mj = rnd(&s, 8);
 		bool any_running = false;
 
-		for (size_t i = 0; i < 8; i++) {
-			size_t j = R(8);
-			uint8_t t = orders[i];
-			orders[i] = orders[j];
-			orders[j] = t;
-		}
-		for (size_t i = 0; i < nd; i++) {
-			d[i].order = orders[i];
-			d[i].dcap = 1 + R(10);
-			d[i].ul = R(12);
-			d[i].dl = R(d[i].dcap + 1);
-			d[i].running = R(3) == 0;
-			d[i].last = 0;
+		random_dstates(d, nd, &s, 10, 12, 3);
+		for (size_t i = 0; i < nd; i++)
 			any_running |= d[i].running;
-		}
 		/* chain order */
 		size_t idx[8];
 		for (size_t i = 0; i < nd; i++)
@@ -478,7 +481,6 @@ static int t_gate_random(void)
 		 * job is running whose end lets it go */
 		CHECK(!any_before || any_after || any_running, "gate stalled the pool");
 	}
-#undef R
 	CHECK(held > 1000, "only %u tasks held: the test does not exercise the gate", held);
 	return 0;
 }
