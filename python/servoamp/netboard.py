@@ -49,6 +49,17 @@ def nic_args(host_port: int, guest_port: int = TELEMETRY_PORT, model: str = NIC_
     return ["-nic", f"user,model={model},hostfwd=tcp:127.0.0.1:{host_port}-:{guest_port}"]
 
 
+def bring_up(console: qemu.Uart, prompt: str, guest_addr: str = GUEST_ADDR,
+             timeout: float = 20.0) -> str:
+    """Bring the guest's eth0 up (``servoamp-net`` in the initramfs) on the
+    shell of ``console``; return its output, or raise QemuError when the
+    command fails or the link has no carrier."""
+    rc, out = qemu.run_shell(console, f"servoamp-net {guest_addr}", prompt, timeout=timeout)
+    if rc or "carrier 1" not in out:
+        raise qemu.QemuError(f"guest network not up (exit status {rc}): {out}")
+    return out
+
+
 def _log(msg: str) -> None:
     print(f"[netboard] {msg}", flush=True)
 
@@ -79,9 +90,7 @@ class ControllerBoard:
         self.machine.start()
         try:
             self.boot_times = qemu.boot_to_shell(self.machine, timeout=timeout)
-            out = self.sh("servoamp-net " + GUEST_ADDR, timeout=20)
-            if "carrier 1" not in out:
-                raise qemu.QemuError(f"guest network not up: {out}")
+            bring_up(self.machine.uart(0), self.prompt, GUEST_ADDR, timeout=20)
         except BaseException:
             self.machine.mark_failed()
             self.stop()

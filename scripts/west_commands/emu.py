@@ -22,7 +22,8 @@ bound to 127.0.0.1, the monitor on QMP; exits non-zero when a command fails.
 (a free port when PORT is left out) forwarded to the guest's telemetry port
 (board.yaml "network"). Scripted mode brings eth0 up first (servoamp-net);
 interactive mode prints the command to do it. Then `servod` in the guest
-and `servoamp record --port PORT` on the host record the controller.
+and `servoamp record --connect 127.0.0.1:PORT -o run.mcap` on the host
+record the controller.
 
 Also runs without a west workspace: ``.venv/bin/python scripts/west_commands/emu.py``.
 """
@@ -91,17 +92,16 @@ def run(args: argparse.Namespace) -> int:
     if args.script:
         commands += [ln for ln in args.script.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     nic, host_port = net_args(board, args.net)
+    extra = (["-icount", args.icount] if args.icount else []) + nic
     if not commands:
         if host_port is not None:
             print(f"[emu] in the guest, bring eth0 up with: servoamp-net {board.data['network']['guest_addr']}")
-        return qemu.interactive(board, images, accel=args.accel,
-                                extra_args=(["-icount", args.icount] if args.icount else []) + nic)
-    return scripted(board, images, commands, args, nic)
+        return qemu.interactive(board, images, accel=args.accel, extra_args=extra)
+    return scripted(board, images, commands, args, extra, net=host_port is not None)
 
 
 def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: argparse.Namespace,
-             nic: list[str] | None = None) -> int:
-    extra = (["-icount", args.icount] if args.icount else []) + list(nic or [])
+             extra: list[str], net: bool = False) -> int:
     machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs, extra_args=extra)
     failed = 0
     with machine:
@@ -110,12 +110,12 @@ def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: 
               f"userspace at {times.guest_userspace:.2f} s guest uptime)")
         console = machine.uart(0)
         prompt = str(board.data["linux"]["prompt"])
-        if nic:
-            net_up = f"servoamp-net {board.data['network']['guest_addr']}"
-            rc, out = qemu.run_shell(console, net_up, prompt, timeout=args.timeout)
-            print(f"$ {net_up}\n{out}")
-            if rc or "carrier 1" not in out:
-                print("[emu] guest network not up")
+        if net:
+            try:
+                print(netboard.bring_up(console, prompt, str(board.data["network"]["guest_addr"]),
+                                        timeout=args.timeout))
+            except qemu.QemuError as e:
+                print(f"[emu] {e}")
                 machine.mark_failed()
                 return 1
         for cmd in commands:
