@@ -257,8 +257,31 @@ static int t_wait(void)
 	return 0;
 }
 
+/* config.min_job: 0..4096 accepted (0 = batch, 1 = rule 2 as written),
+ * above refused with a configuration error that names it. */
+static int t_min_job_config(void)
+{
+	struct motion_config c;
+	struct motion *m;
+	struct motion_error e;
+	const uint32_t ok[] = { 0, 1, 4096 };
+
+	motion_config_default(&c);
+	for (size_t i = 0; i < sizeof(ok) / sizeof(ok[0]); i++) {
+		c.min_job = ok[i];
+		CHECK(motion_create(&c, &m, &e) == 0, "min_job %u refused: %s", ok[i], e.msg);
+		motion_destroy(m);
+	}
+	c.min_job = 4097;
+	m = NULL;
+	CHECK(motion_create(&c, &m, &e) != 0 && m == NULL, "min_job 4097 accepted");
+	CHECK(e.code == MOTION_E_CONFIG && strstr(e.msg, "min_job"), "error: %d %s", e.code, e.msg);
+	return 0;
+}
+
 static const struct test_case cases[] = {
 	{ "wait", t_wait },
+	{ "min_job_config", t_min_job_config },
 	{ "drain_matches_sync", t_drain_matches_sync },
 	{ "realtime_send", t_realtime_send },
 };
