@@ -4,13 +4,17 @@
  * hybrid scheduler.  Prints figures and writes them as JSON; it asserts
  * nothing about timing.
  *
- *   motion_bench [--blocks N] [--arcs N] [--reps R] [--workers W] [--json PATH]
+ *   motion_bench [--blocks N] [--arcs N] [--reps R] [--workers W]
+ *                [--batch B] [--queue Q] [--chord UM]
+ *                [--only trapezoid|scurve] [--json PATH]
  *
  * 1. blocks/s through the whole pipeline on one thread (synchronous mode,
  *    the caller consumes every setpoint), on a mixed program of N blocks;
- * 2. the same planning-heavy program (N short arcs, fine chord tolerance)
- *    on the worker pool, setpoints drained by a sink task: hybrid on W
- *    workers vs 1, and vs a plain FIFO schedule on W workers.  Each
+ * 2. a planning-heavy program (N short arcs, fine chord tolerance) on the
+ *    worker pool, setpoints drained by a sink task: hybrid on W workers vs
+ *    1, and vs a plain FIFO schedule on W workers.  It runs twice, with
+ *    trapezoidal and with jerk-limited (S-curve) profiles; in the second,
+ *    planning (look-ahead and accel) is most of the work.  Each
  *    configuration runs R times, interleaved; the best time counts.
  */
 #define _POSIX_C_SOURCE 200809L
@@ -239,11 +243,155 @@ static int run_pool(struct motion_config c, const char *prog, unsigned workers,
 	return rc;
 }
 
+/* Figures of one scheduler experiment (one program, one profile kind). */
+struct sched_figures {
+	const char *key, *profile;
+	struct cfgs {
+		const char *name;
+		unsigned w;
+		enum motion_policy pol;
+		uint32_t min_job; /* 0: the default (whole jobs of batch items) */
+		struct result best;
+	} cf[5];
+	struct result ref;
+	double inflation, sched_share, sp_h, sp_r2, sp_f, bound, calib;
+	double share[MOTION_N_TASKS];
+};
+
+/* Runs the program on the pool in five configurations (hybrid on 1 and W
+ * workers, FIFO on 1 and W, hybrid with rule 2 as written on W), R times
+ * interleaved, best time each; checks every run's setpoints against the
+ * synchronous run, and prints the figures. */
+static int sched_experiment(const struct motion_config *h, const char *prog,
+			    unsigned workers, int reps, struct sched_figures *x)
+{
+	struct cfgs *cf = x->cf;
+
+	memset(cf, 0, sizeof(x->cf));
+	cf[0].name = "hybrid_1"; cf[0].w = 1; cf[0].pol = MOTION_POLICY_HYBRID;
+	cf[1].name = "hybrid_n"; cf[1].w = workers; cf[1].pol = MOTION_POLICY_HYBRID;
+	cf[2].name = "fifo_1"; cf[2].w = 1; cf[2].pol = MOTION_POLICY_FIFO;
+	cf[3].name = "fifo_n"; cf[3].w = workers; cf[3].pol = MOTION_POLICY_FIFO;
+	/* seed 003's rule 2 as written: a task may run on a single item */
+	cf[4].name = "hybrid_n_rule2"; cf[4].w = workers; cf[4].pol = MOTION_POLICY_HYBRID;
+	cf[4].min_job = 1;
+	struct result *ref = &x->ref;
+	if (run_sync(h, prog, ref))
+		return 1;
+	x->calib = 0;
+	for (int k = 0; k < reps; k++) {
+		double cal = calibrate(workers);
+		x->calib = cal > x->calib ? cal : x->calib;
+		for (int i = 0; i < 5; i++) {
+			struct result r;
+			if (run_pool(*h, prog, cf[i].w, cf[i].pol, cf[i].min_job, &r)) {
+				fprintf(stderr, "%s failed\n", cf[i].name);
+				return 1;
+			}
+			if (r.checksum != ref->checksum || r.setpoints != ref->setpoints) {
+				fprintf(stderr, "%s: setpoints differ from the synchronous run\n",
+					cf[i].name);
+				return 1;
+			}
+			if (k == 0 || r.wall < cf[i].best.wall)
+				cf[i].best = r;
+		}
+	}
+	printf("planning-heavy program, %s profiles: %llu arcs/lines, %llu segments, %llu setpoints\n",
+	       x->profile, (unsigned long long)ref->blocks, (unsigned long long)ref->segments,
+	       (unsigned long long)ref->setpoints);
+	for (int i = 0; i < 5; i++) {
+		const struct result *b = &cf[i].best;
+		printf("  %-14s %u worker(s): %.3f s wall, %.3f s cpu, jobs per worker %llu/%llu, idle waits %llu/%llu\n",
+		       cf[i].name, cf[i].w, b->wall, b->cpu,
+		       (unsigned long long)b->jobs[0], (unsigned long long)b->jobs[1],
+		       (unsigned long long)b->idle[0], (unsigned long long)b->idle[1]);
+		printf("                 worker time in jobs / scheduler path / asleep (ms):");
+		for (unsigned w = 0; w < cf[i].w && w < MOTION_MAX_WORKERS; w++)
+			printf("%s %.1f/%.2f/%.2f", w ? "," : "", b->job_ns[w] * 1e-6,
+			       b->sched_ns[w] * 1e-6, b->sleep_ns[w] * 1e-6);
+		printf("\n");
+	}
+	/* work inflation: job time summed over workers, n workers vs 1 */
+	uint64_t job1 = 0, jobn = 0, schedn = 0;
+	for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++) {
+		job1 += cf[0].best.job_ns[w];
+		jobn += cf[1].best.job_ns[w];
+		schedn += cf[1].best.sched_ns[w];
+	}
+	x->inflation = job1 ? (double)jobn / (double)job1 : 0;
+	x->sched_share = jobn + schedn ? (double)schedn / (double)(jobn + schedn) : 0;
+	printf("  hybrid, %u workers: time inside jobs %.2fx that of 1 worker for the same work "
+	       "(items crossing cores, and preemption when the machine is busy); "
+	       "scheduler path %.1f%% of worker time\n",
+	       workers, x->inflation, 100.0 * x->sched_share);
+	const struct result *h1 = &cf[1 - 1].best;
+	printf("  time per task (hybrid, 1 worker):");
+	uint64_t tot = 0, mx = 0;
+	for (unsigned t = 0; t < h1->n_tasks; t++) {
+		tot += h1->busy_ns[t];
+		mx = h1->busy_ns[t] > mx ? h1->busy_ns[t] : mx;
+	}
+	for (unsigned t = 0; t < h1->n_tasks; t++) {
+		x->share[t] = h1->busy_ns[t] / (double)tot;
+		printf(" %s %.0f%%", h1->names[t], 100.0 * x->share[t]);
+	}
+	printf("\n");
+	const struct result *hn = &cf[1].best;
+	printf("  time in jobs per task, ms, 1 worker -> %u workers:", workers);
+	for (unsigned t = 0; t < h1->n_tasks; t++)
+		printf(" %s %.1f->%.1f", h1->names[t], h1->busy_ns[t] * 1e-6,
+		       hn->busy_ns[t] * 1e-6);
+	printf("\n");
+	x->sp_h = cf[0].best.wall / cf[1].best.wall;
+	x->sp_r2 = cf[0].best.wall / cf[4].best.wall;
+	x->sp_f = cf[3].best.wall / cf[1].best.wall;
+	double bound = mx ? (double)tot / (double)mx : 0;
+	x->bound = bound < workers ? bound : (double)workers;
+	printf("  speed-up hybrid %u vs 1 worker: %.3f (bound from the largest task: %.2f)\n",
+	       workers, x->sp_h, x->bound);
+	printf("  speed-up without whole jobs (rule 2 as written): %.3f\n", x->sp_r2);
+	printf("  hybrid vs plain FIFO, %u workers: %.3f\n", workers, x->sp_f);
+	printf("  calibration: %u threads of independent arithmetic ran %.2fx faster than one"
+	       " (what the machine offered during the runs)\n", workers, x->calib);
+	return 0;
+}
+
+static void json_sched(FILE *f, const struct sched_figures *x, double chord_um,
+		       unsigned workers, int reps, bool last)
+{
+	const struct cfgs *cf = x->cf;
+	const struct result *h1 = &cf[0].best;
+
+	fprintf(f, "  \"%s\": {\n    \"program\": \"short arcs, chord tolerance %g um\", \"profile\": \"%s\", \"blocks\": %llu, \"segments\": %llu, \"setpoints\": %llu, \"workers\": %u, \"reps\": %d,\n",
+		x->key, chord_um, x->profile, (unsigned long long)x->ref.blocks,
+		(unsigned long long)x->ref.segments, (unsigned long long)x->ref.setpoints,
+		workers, reps);
+	for (int i = 0; i < 5; i++)
+		fprintf(f, "    \"%s\": {\"workers\": %u, \"wall_s\": %.6f, \"cpu_s\": %.6f, \"job_ms\": [%.2f, %.2f], \"sched_ms\": [%.2f, %.2f], \"sleep_ms\": [%.2f, %.2f]},\n",
+			cf[i].name, cf[i].w, cf[i].best.wall, cf[i].best.cpu,
+			cf[i].best.job_ns[0] * 1e-6, cf[i].best.job_ns[1] * 1e-6,
+			cf[i].best.sched_ns[0] * 1e-6, cf[i].best.sched_ns[1] * 1e-6,
+			cf[i].best.sleep_ns[0] * 1e-6, cf[i].best.sleep_ns[1] * 1e-6);
+	fprintf(f, "    \"task_time_share\": {");
+	for (unsigned t = 0; t < h1->n_tasks; t++)
+		fprintf(f, "%s\"%s\": %.4f", t ? ", " : "", h1->names[t], x->share[t]);
+	fprintf(f, "},\n");
+	fprintf(f, "    \"job_time_n_over_1\": %.4f,\n", x->inflation);
+	fprintf(f, "    \"scheduler_path_share_n\": %.4f,\n", x->sched_share);
+	fprintf(f, "    \"speedup_hybrid_n_over_1\": %.4f,\n", x->sp_h);
+	fprintf(f, "    \"speedup_hybrid_rule2_as_written_n_over_1\": %.4f,\n", x->sp_r2);
+	fprintf(f, "    \"speedup_hybrid_over_fifo_n\": %.4f,\n", x->sp_f);
+	fprintf(f, "    \"speedup_bound_largest_task\": %.4f,\n", x->bound);
+	fprintf(f, "    \"calibration_independent_threads_speedup\": %.4f\n  }%s\n",
+		x->calib, last ? "" : ",");
+}
+
 int main(int argc, char **argv)
 {
 	int blocks = 50000, arcs = 20000, reps = 3, batch = 1024, queue = 8192;
 	double chord_um = 0.2;
-	bool jerk = false;
+	const char *only = NULL; /* one profile kind only */
 	unsigned workers = 2;
 	const char *json = NULL;
 
@@ -262,19 +410,22 @@ int main(int argc, char **argv)
 			queue = atoi(argv[++i]);
 		else if (!strcmp(argv[i], "--chord") && i + 1 < argc)
 			chord_um = atof(argv[++i]);
-		else if (!strcmp(argv[i], "--jerk"))
-			jerk = true;
+		else if (!strcmp(argv[i], "--only") && i + 1 < argc)
+			only = argv[++i];
 		else if (!strcmp(argv[i], "--json") && i + 1 < argc)
 			json = argv[++i];
 		else {
 			fprintf(stderr, "usage: motion_bench [--blocks N] [--arcs N] [--reps R] "
-					"[--workers W] [--batch B] [--queue Q] [--chord UM] [--jerk] [--json PATH]\n");
+					"[--workers W] [--batch B] [--queue Q] [--chord UM] [--only trapezoid|scurve] [--json PATH]\n");
 			return 2;
 		}
 	}
 	if (blocks < 1 || arcs < 1 || reps < 1 || workers < 1 || workers > 8 || batch < 1 ||
-	    queue < 16 || !(chord_um > 0))
+	    queue < 16 || !(chord_um > 0) ||
+	    (only && strcmp(only, "trapezoid") && strcmp(only, "scurve"))) {
+		fprintf(stderr, "motion_bench: bad option value\n");
 		return 2;
+	}
 
 	/* 1. one thread, whole pipeline */
 	struct motion_config c;
@@ -306,7 +457,6 @@ int main(int argc, char **argv)
 	for (int k = 0; k < 3; k++)
 		h.axis[k].amax = 10000;
 	h.batch = (uint32_t)batch;
-	h.jerk_limited = jerk;
 	for (int k = 0; k < 3; k++)
 		h.axis[k].jmax = 1e6;
 	h.q_blocks = (uint32_t)queue / 4;
@@ -317,97 +467,22 @@ int main(int argc, char **argv)
 	char *heavy = gen_arcs(arcs);
 	if (!heavy)
 		return 1;
-	struct cfgs {
-		const char *name;
-		unsigned w;
-		enum motion_policy pol;
-		uint32_t min_job; /* 0: the default (whole jobs of batch items) */
-		struct result best;
-	} cf[5];
-	memset(cf, 0, sizeof(cf));
-	cf[0].name = "hybrid_1"; cf[0].w = 1; cf[0].pol = MOTION_POLICY_HYBRID;
-	cf[1].name = "hybrid_n"; cf[1].w = workers; cf[1].pol = MOTION_POLICY_HYBRID;
-	cf[2].name = "fifo_1"; cf[2].w = 1; cf[2].pol = MOTION_POLICY_FIFO;
-	cf[3].name = "fifo_n"; cf[3].w = workers; cf[3].pol = MOTION_POLICY_FIFO;
-	/* seed 003's rule 2 as written: a task may run on a single item */
-	cf[4].name = "hybrid_n_rule2"; cf[4].w = workers; cf[4].pol = MOTION_POLICY_HYBRID;
-	cf[4].min_job = 1;
-	struct result ref;
-	if (run_sync(&h, heavy, &ref))
-		return 1;
-	double calib_best = 0;
-	for (int k = 0; k < reps; k++) {
-		double cal = calibrate(workers);
-		calib_best = cal > calib_best ? cal : calib_best;
-		for (int i = 0; i < 5; i++) {
-			struct result r;
-			if (run_pool(h, heavy, cf[i].w, cf[i].pol, cf[i].min_job, &r)) {
-				fprintf(stderr, "%s failed\n", cf[i].name);
-				return 1;
-			}
-			if (r.checksum != ref.checksum || r.setpoints != ref.setpoints) {
-				fprintf(stderr, "%s: setpoints differ from the synchronous run\n",
-					cf[i].name);
-				return 1;
-			}
-			if (k == 0 || r.wall < cf[i].best.wall)
-				cf[i].best = r;
-		}
+	/* the same program with trapezoidal and with jerk-limited (S-curve)
+	 * profiles: the second moves most of the work into planning */
+	struct sched_figures fig[2];
+	unsigned nfig = 0;
+	memset(fig, 0, sizeof(fig));
+	for (int kind = 0; kind < 2; kind++) {
+		const char *prof = kind ? "scurve" : "trapezoid";
+		if (only && strcmp(only, prof))
+			continue;
+		struct sched_figures *x = &fig[nfig++];
+		x->key = kind ? "scheduler_scurve" : "scheduler";
+		x->profile = kind ? "jerk-limited (S-curve)" : "trapezoidal";
+		h.jerk_limited = kind == 1;
+		if (sched_experiment(&h, heavy, workers, reps, x))
+			return 1;
 	}
-	printf("planning-heavy program: %llu arcs/lines, %llu segments, %llu setpoints\n",
-	       (unsigned long long)ref.blocks, (unsigned long long)ref.segments,
-	       (unsigned long long)ref.setpoints);
-	for (int i = 0; i < 5; i++) {
-		const struct result *b = &cf[i].best;
-		printf("  %-14s %u worker(s): %.3f s wall, %.3f s cpu, jobs per worker %llu/%llu, idle waits %llu/%llu\n",
-		       cf[i].name, cf[i].w, b->wall, b->cpu,
-		       (unsigned long long)b->jobs[0], (unsigned long long)b->jobs[1],
-		       (unsigned long long)b->idle[0], (unsigned long long)b->idle[1]);
-		printf("                 worker time in jobs / scheduler path / asleep (ms):");
-		for (unsigned w = 0; w < cf[i].w && w < MOTION_MAX_WORKERS; w++)
-			printf("%s %.1f/%.2f/%.2f", w ? "," : "", b->job_ns[w] * 1e-6,
-			       b->sched_ns[w] * 1e-6, b->sleep_ns[w] * 1e-6);
-		printf("\n");
-	}
-	/* work inflation: job time summed over workers, n workers vs 1 */
-	uint64_t job1 = 0, jobn = 0, schedn = 0;
-	for (unsigned w = 0; w < MOTION_MAX_WORKERS; w++) {
-		job1 += cf[0].best.job_ns[w];
-		jobn += cf[1].best.job_ns[w];
-		schedn += cf[1].best.sched_ns[w];
-	}
-	double inflation = job1 ? (double)jobn / (double)job1 : 0;
-	double sched_share = jobn + schedn ? (double)schedn / (double)(jobn + schedn) : 0;
-	printf("  hybrid, %u workers: time inside jobs %.2fx that of 1 worker for the same work "
-	       "(items crossing cores, and preemption when the machine is busy); "
-	       "scheduler path %.1f%% of worker time\n",
-	       workers, inflation, 100.0 * sched_share);
-	const struct result *h1 = &cf[1 - 1].best;
-	printf("  time per task (hybrid, 1 worker):");
-	uint64_t tot = 0, mx = 0;
-	for (unsigned t = 0; t < h1->n_tasks; t++) {
-		tot += h1->busy_ns[t];
-		mx = h1->busy_ns[t] > mx ? h1->busy_ns[t] : mx;
-	}
-	for (unsigned t = 0; t < h1->n_tasks; t++)
-		printf(" %s %.0f%%", h1->names[t], 100.0 * h1->busy_ns[t] / (double)tot);
-	printf("\n");
-	const struct result *hn = &cf[1].best;
-	printf("  time in jobs per task, ms, 1 worker -> %u workers:", workers);
-	for (unsigned t = 0; t < h1->n_tasks; t++)
-		printf(" %s %.1f->%.1f", h1->names[t], h1->busy_ns[t] * 1e-6,
-		       hn->busy_ns[t] * 1e-6);
-	printf("\n");
-	double sp_h = cf[0].best.wall / cf[1].best.wall;
-	double sp_r2 = cf[0].best.wall / cf[4].best.wall;
-	double sp_f = cf[3].best.wall / cf[1].best.wall;
-	double bound = mx ? (double)tot / (double)mx : 0;
-	printf("  speed-up hybrid %u vs 1 worker: %.3f (bound from the largest task: %.2f)\n",
-	       workers, sp_h, bound < workers ? bound : (double)workers);
-	printf("  speed-up without whole jobs (rule 2 as written): %.3f\n", sp_r2);
-	printf("  hybrid vs plain FIFO, %u workers: %.3f\n", workers, sp_f);
-	printf("  calibration: %u threads of independent arithmetic ran %.2fx faster than one"
-	       " (what the machine offered during the runs)\n", workers, calib_best);
 	long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
 	double load[1] = { -1 };
 	FILE *lf = fopen("/proc/loadavg", "r");
@@ -425,36 +500,17 @@ int main(int argc, char **argv)
 			return 1;
 		}
 		fprintf(f, "{\n  \"benchmark\": \"motion_bench\",\n");
-		fprintf(f, "  \"command\": \"build/motion/host/motion_bench --blocks %d --arcs %d --reps %d --workers %u --batch %d --queue %d --chord %g%s\",\n",
-			blocks, arcs, reps, workers, batch, queue, chord_um, jerk ? " --jerk" : "");
+		fprintf(f, "  \"command\": \"build/motion/host/motion_bench --blocks %d --arcs %d --reps %d --workers %u --batch %d --queue %d --chord %g%s%s\",\n",
+			blocks, arcs, reps, workers, batch, queue, chord_um, only ? " --only " : "", only ? only : "");
 		fprintf(f, "  \"machine\": {\"cpus_online\": %ld, \"loadavg_1min_at_end\": %.2f},\n", ncpu, load[0]);
-		fprintf(f, "  \"single_thread\": {\"program\": \"mixed lines/arcs/dwells\", \"blocks\": %llu, \"segments\": %llu, \"setpoints\": %llu, \"wall_s\": %.6f, \"blocks_per_s\": %.1f, \"segments_per_s\": %.1f, \"setpoints_per_s\": %.1f},\n",
+		fprintf(f, "  \"single_thread\": {\"program\": \"mixed lines/arcs/dwells\", \"blocks\": %llu, \"segments\": %llu, \"setpoints\": %llu, \"wall_s\": %.6f, \"blocks_per_s\": %.1f, \"segments_per_s\": %.1f, \"setpoints_per_s\": %.1f}%s\n",
 			(unsigned long long)best_sync.blocks, (unsigned long long)best_sync.segments,
 			(unsigned long long)best_sync.setpoints, best_sync.wall, bps,
-			best_sync.segments / best_sync.wall, best_sync.setpoints / best_sync.wall);
-		fprintf(f, "  \"scheduler\": {\n    \"program\": \"short arcs, chord tolerance %g um\", \"blocks\": %llu, \"segments\": %llu, \"setpoints\": %llu, \"workers\": %u, \"reps\": %d,\n",
-			chord_um, (unsigned long long)ref.blocks, (unsigned long long)ref.segments,
-			(unsigned long long)ref.setpoints, workers, reps);
-		for (int i = 0; i < 5; i++)
-			fprintf(f, "    \"%s\": {\"workers\": %u, \"wall_s\": %.6f, \"cpu_s\": %.6f, \"job_ms\": [%.2f, %.2f], \"sched_ms\": [%.2f, %.2f], \"sleep_ms\": [%.2f, %.2f]},\n",
-				cf[i].name, cf[i].w, cf[i].best.wall, cf[i].best.cpu,
-				cf[i].best.job_ns[0] * 1e-6, cf[i].best.job_ns[1] * 1e-6,
-				cf[i].best.sched_ns[0] * 1e-6, cf[i].best.sched_ns[1] * 1e-6,
-				cf[i].best.sleep_ns[0] * 1e-6, cf[i].best.sleep_ns[1] * 1e-6);
-		fprintf(f, "    \"task_time_share\": {");
-		for (unsigned t = 0; t < h1->n_tasks; t++)
-			fprintf(f, "%s\"%s\": %.4f", t ? ", " : "", h1->names[t],
-				h1->busy_ns[t] / (double)tot);
-		fprintf(f, "},\n");
-		fprintf(f, "    \"job_time_n_over_1\": %.4f,\n", inflation);
-		fprintf(f, "    \"scheduler_path_share_n\": %.4f,\n", sched_share);
-		fprintf(f, "    \"speedup_hybrid_n_over_1\": %.4f,\n", sp_h);
-		fprintf(f, "    \"speedup_hybrid_rule2_as_written_n_over_1\": %.4f,\n", sp_r2);
-		fprintf(f, "    \"speedup_hybrid_over_fifo_n\": %.4f,\n", sp_f);
-		fprintf(f, "    \"speedup_bound_largest_task\": %.4f,\n",
-			bound < workers ? bound : (double)workers);
-		fprintf(f, "    \"calibration_independent_threads_speedup\": %.4f\n  }\n}\n",
-			calib_best);
+			best_sync.segments / best_sync.wall, best_sync.setpoints / best_sync.wall,
+			nfig ? "," : "");
+		for (unsigned i = 0; i < nfig; i++)
+			json_sched(f, &fig[i], chord_um, workers, reps, i + 1 == nfig);
+		fprintf(f, "}\n");
 		fclose(f);
 	}
 	free(mixed);

@@ -1,4 +1,5 @@
 /* SPDX-License-Identifier: MIT */
+#include <float.h>
 #include <math.h>
 #include <string.h>
 
@@ -20,21 +21,97 @@ double plan_trans_dist(double va, double vb, double a, double j, bool jerk)
 	return 0.5 * (va + vb) * plan_trans_time(vb - va, a, j, jerk);
 }
 
+/* Jerk-limited speed planning solves "the largest speed whose transitions
+ * fit in a length" (look-ahead: one transition; accel planning: the two
+ * transitions of a segment).  The distance is continuous, increasing and
+ * piecewise smooth in that speed (a transition that reaches the
+ * acceleration limit, or one that does not), so a Newton iteration with a
+ * starting point from the closed form converges in a few steps; it is kept
+ * inside a bracket [feasible, infeasible] and falls back to bisection when
+ * a step would leave it.  The answer is always on the feasible side: the
+ * transitions of the returned speed fit in the length. */
+
+struct fit_problem {
+	double u0, u1; /* the fixed speeds (reach: u1 unused) */
+	bool two;      /* two transitions (peak) or one (reach) */
+	double L, a, j;
+};
+
+/* d/dw of the distance of the transition u -> w (w >= u). */
+static double trans_dist_dw(double u, double w, double a, double j)
+{
+	double dv = w - u;
+
+	if (dv >= a * a / j)
+		return w / a + 0.5 * a / j;
+	double r = sqrt(dv / j); /* half the transition time */
+	return r > 0 ? r + (u + w) / (2.0 * j * r) : INFINITY;
+}
+
+static double fit_excess(const struct fit_problem *p, double w, double *dd)
+{
+	double d = plan_trans_dist(p->u0, w, p->a, p->j, true);
+
+	*dd = trans_dist_dw(p->u0, w, p->a, p->j);
+	if (p->two) {
+		d += plan_trans_dist(w, p->u1, p->a, p->j, true);
+		*dd += trans_dist_dw(p->u1, w, p->a, p->j);
+	}
+	return d - p->L;
+}
+
+/* The largest w in [lo, hi] with fit_excess(w) <= 0, given that
+ * fit_excess(lo) <= 0 < fit_excess(hi) and a first guess x. */
+static double fit_solve(const struct fit_problem *p, double lo, double hi, double x)
+{
+	const double tol = 16.0 * DBL_EPSILON;
+
+	for (int i = 0; i < 100 && hi - lo > tol * hi; i++) {
+		if (!(x > lo && x < hi))
+			x = 0.5 * (lo + hi);
+		double dd, f = fit_excess(p, x, &dd);
+		if (f <= 0)
+			lo = x;
+		else
+			hi = x;
+		double step = f / dd;
+		if (!(dd > 0) || !isfinite(step)) {
+			x = 0.5 * (lo + hi);
+			continue;
+		}
+		/* near the root, step just across it so that the bracket
+		 * closes from both sides instead of creeping from one */
+		if (fabs(step) < tol * x)
+			step += f > 0 ? 0.5 * tol * x : -0.5 * tol * x;
+		x -= step;
+	}
+	return lo;
+}
+
 double plan_reach(double v, double L, double a, double j, bool jerk)
 {
 	double hi = sqrt(v * v + 2.0 * a * L);
 
 	if (!jerk || L <= 0)
 		return hi;
-	double lo = v;
-	for (int i = 0; i < 48; i++) {
-		double mid = 0.5 * (lo + hi);
-		if (plan_trans_dist(v, mid, a, j, true) <= L)
-			lo = mid;
-		else
-			hi = mid;
+	/* first guess, closed form: a transition that reaches a (speed
+	 * change at least c = a^2/j) is a quadratic in the end speed; a
+	 * shorter one is v + j x^2 with j x^3 + 2 v x = L, x its half time */
+	double c = a * a / j, x;
+	if (L >= (2.0 * v + c) * a / j) {
+		double d = c - 2.0 * v;
+		x = 0.5 * (sqrt(d * d + 8.0 * a * L) - c);
+	} else {
+		double q = 0.5 * L / j, pp = 2.0 * v / (3.0 * j);
+		double r = cbrt(q + sqrt(q * q + pp * pp * pp));
+		double h = r > 0 ? r - pp / r : 0.0;
+		x = v + j * h * h;
 	}
-	return lo;
+	const struct fit_problem p = { v, 0.0, false, L, a, j };
+	double dd;
+	if (fit_excess(&p, hi, &dd) <= 0)
+		return hi; /* not reached: a jerk limit only lengthens it */
+	return fit_solve(&p, v, hi, x);
 }
 
 static void trans_init(struct trans *t, double va, double vb, double a, double j,
@@ -111,16 +188,14 @@ double plan_peak(const struct seg *g, double v0, double v1, bool jerk)
 			   plan_trans_dist(g->vmax, v1, a, j, true) <= L) {
 		vp = g->vmax;
 	} else {
-		double lo = vlo, hi = g->vmax;
-		for (int i = 0; i < 48; i++) {
-			double mid = 0.5 * (lo + hi);
-			if (plan_trans_dist(v0, mid, a, j, true) +
-				    plan_trans_dist(mid, v1, a, j, true) <= L)
-				lo = mid;
-			else
-				hi = mid;
-		}
-		vp = lo;
+		/* first guess: both transitions reach the acceleration limit,
+		 * then the distance is vp^2/a + vp a/j + k, a quadratic */
+		double k = -(v0 * v0 + v1 * v1) / (2.0 * a) + (v0 + v1) * a / (2.0 * j);
+		double b = a / j, disc = b * b + 4.0 * (L - k) / a;
+		double x = disc > 0 ? 0.5 * a * (sqrt(disc) - b) : vlo;
+		const struct fit_problem p = { v0, v1, true, L, a, j };
+		double dd;
+		vp = fit_excess(&p, vlo, &dd) <= 0 ? fit_solve(&p, vlo, g->vmax, x) : vlo;
 	}
 	if (vp < vlo)
 		vp = vlo;

@@ -15,6 +15,7 @@ BUILD = ROOT / "build" / "motion"
 TEST_BINARIES = (
     "test_gcode",
     "test_motion",
+    "test_plan",
     "test_sched",
     "test_sched_threads",
     "test_stream",
