@@ -252,7 +252,8 @@ long motion_stream_write(struct motion *m, const char *data, size_t len)
 
 	if (atomic_load(&m->faulted) || atomic_load(&s->eos) || s->mem)
 		return -1;
-	m->loaded = true;
+	if (!m->loaded) /* once: this line is read by every stage */
+		m->loaded = true;
 	uint32_t t = atomic_load_explicit(&s->tail, memory_order_relaxed);
 	uint32_t h = atomic_load_explicit(&s->head, memory_order_acquire);
 	uint32_t room = s->size - (t - h);
