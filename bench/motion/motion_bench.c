@@ -9,7 +9,8 @@
  *                [--only trapezoid|scurve] [--json PATH]
  *
  * 1. blocks/s through the whole pipeline on one thread (synchronous mode,
- *    the caller consumes every setpoint), on a mixed program of N blocks;
+ *    the caller consumes every setpoint), on a mixed program of N blocks,
+ *    with trapezoidal and with S-curve profiles;
  * 2. a planning-heavy program (N short arcs, fine chord tolerance) on the
  *    worker pool, setpoints drained by a sink task: hybrid on W workers vs
  *    1, and vs a plain FIFO schedule on W workers.  It runs twice, with
@@ -427,28 +428,32 @@ int main(int argc, char **argv)
 		return 2;
 	}
 
-	/* 1. one thread, whole pipeline */
+	/* 1. one thread, whole pipeline, trapezoidal and S-curve profiles */
 	struct motion_config c;
-	motion_config_default(&c);
 	char *mixed = gen_mixed(blocks);
-	struct result rs, best_sync;
-	memset(&best_sync, 0, sizeof(best_sync));
+	struct result single[2];
+	memset(single, 0, sizeof(single));
 	if (!mixed)
 		return 1;
-	for (int k = 0; k < reps; k++) {
-		if (run_sync(&c, mixed, &rs))
-			return 1;
-		if (k == 0 || rs.wall < best_sync.wall)
-			best_sync = rs;
+	for (int kind = 0; kind < 2; kind++) {
+		struct result rs, *best = &single[kind];
+		motion_config_default(&c);
+		c.jerk_limited = kind == 1;
+		for (int k = 0; k < reps; k++) {
+			if (run_sync(&c, mixed, &rs))
+				return 1;
+			if (k == 0 || rs.wall < best->wall)
+				*best = rs;
+		}
+		printf("one thread, mixed program, %s profiles: %llu blocks, %llu segments, "
+		       "%llu setpoints (%.1f s of motion) in %.3f s\n",
+		       kind ? "S-curve" : "trapezoidal", (unsigned long long)best->blocks,
+		       (unsigned long long)best->segments, (unsigned long long)best->setpoints,
+		       best->setpoints * c.period_us * 1e-6, best->wall);
+		printf("  %.0f blocks/s, %.0f segments/s, %.0f setpoints/s\n",
+		       best->blocks / best->wall, best->segments / best->wall,
+		       best->setpoints / best->wall);
 	}
-	double bps = best_sync.blocks / best_sync.wall;
-	printf("one thread, mixed program: %llu blocks, %llu segments, %llu setpoints "
-	       "(%.1f s of motion) in %.3f s\n",
-	       (unsigned long long)best_sync.blocks, (unsigned long long)best_sync.segments,
-	       (unsigned long long)best_sync.setpoints, best_sync.setpoints * c.period_us * 1e-6,
-	       best_sync.wall);
-	printf("  %.0f blocks/s, %.0f segments/s, %.0f setpoints/s\n", bps,
-	       best_sync.segments / best_sync.wall, best_sync.setpoints / best_sync.wall);
 
 	/* 2. scheduler speed-up on a planning-heavy program */
 	struct motion_config h;
@@ -503,11 +508,16 @@ int main(int argc, char **argv)
 		fprintf(f, "  \"command\": \"build/motion/host/motion_bench --blocks %d --arcs %d --reps %d --workers %u --batch %d --queue %d --chord %g%s%s\",\n",
 			blocks, arcs, reps, workers, batch, queue, chord_um, only ? " --only " : "", only ? only : "");
 		fprintf(f, "  \"machine\": {\"cpus_online\": %ld, \"loadavg_1min_at_end\": %.2f},\n", ncpu, load[0]);
-		fprintf(f, "  \"single_thread\": {\"program\": \"mixed lines/arcs/dwells\", \"blocks\": %llu, \"segments\": %llu, \"setpoints\": %llu, \"wall_s\": %.6f, \"blocks_per_s\": %.1f, \"segments_per_s\": %.1f, \"setpoints_per_s\": %.1f}%s\n",
-			(unsigned long long)best_sync.blocks, (unsigned long long)best_sync.segments,
-			(unsigned long long)best_sync.setpoints, best_sync.wall, bps,
-			best_sync.segments / best_sync.wall, best_sync.setpoints / best_sync.wall,
-			nfig ? "," : "");
+		for (int kind = 0; kind < 2; kind++) {
+			const struct result *r = &single[kind];
+			fprintf(f, "  \"%s\": {\"program\": \"mixed lines/arcs/dwells\", \"profile\": \"%s\", \"blocks\": %llu, \"segments\": %llu, \"setpoints\": %llu, \"wall_s\": %.6f, \"blocks_per_s\": %.1f, \"segments_per_s\": %.1f, \"setpoints_per_s\": %.1f}%s\n",
+				kind ? "single_thread_scurve" : "single_thread",
+				kind ? "jerk-limited (S-curve)" : "trapezoidal",
+				(unsigned long long)r->blocks, (unsigned long long)r->segments,
+				(unsigned long long)r->setpoints, r->wall, r->blocks / r->wall,
+				r->segments / r->wall, r->setpoints / r->wall,
+				kind == 0 || nfig ? "," : "");
+		}
 		for (unsigned i = 0; i < nfig; i++)
 			json_sched(f, &fig[i], chord_um, workers, reps, i + 1 == nfig);
 		fprintf(f, "}\n");

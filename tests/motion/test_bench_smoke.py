@@ -16,8 +16,11 @@ def test_bench_tiny_writes_json(tmp_path: Path) -> None:
                        "--json", str(out)])
     assert proc.returncode == 0, proc.stdout + proc.stderr
     data = json.loads(out.read_text())
-    single = data["single_thread"]
-    assert single["blocks"] > 0 and single["blocks_per_s"] > 0
+    for key in ("single_thread", "single_thread_scurve"):
+        single = data[key]
+        assert single["blocks"] > 0 and single["blocks_per_s"] > 0
+    assert data["single_thread"]["profile"] == "trapezoidal"
+    assert data["single_thread_scurve"]["segments"] == data["single_thread"]["segments"]
     for key, profile in (("scheduler", "trapezoidal"),
                          ("scheduler_scurve", "jerk-limited (S-curve)")):
         sched = data[key]
