@@ -61,7 +61,7 @@ static double fit_excess(const struct fit_problem *p, double w, double *dd)
 }
 
 /* The largest w in [lo, hi] with fit_excess(w) <= 0, given that
- * fit_excess(lo) <= 0 < fit_excess(hi) and a first guess x. */
+ * fit_excess(lo) <= 0 < fit_excess(hi), starting from x. */
 static double fit_solve(const struct fit_problem *p, double lo, double hi, double x)
 {
 	const double tol = 16.0 * DBL_EPSILON;
@@ -97,21 +97,21 @@ double plan_reach(double v, double L, double a, double j, bool jerk)
 	/* first guess, closed form: a transition that reaches a (speed
 	 * change at least c = a^2/j) is a quadratic in the end speed; a
 	 * shorter one is v + j x^2 with j x^3 + 2 v x = L, x its half time */
-	double c = a * a / j, x;
+	double c = a * a / j, guess;
 	if (L >= (2.0 * v + c) * a / j) {
 		double d = c - 2.0 * v;
-		x = 0.5 * (sqrt(d * d + 8.0 * a * L) - c);
+		guess = 0.5 * (sqrt(d * d + 8.0 * a * L) - c);
 	} else {
 		double q = 0.5 * L / j, pp = 2.0 * v / (3.0 * j);
 		double r = cbrt(q + sqrt(q * q + pp * pp * pp));
 		double h = r > 0 ? r - pp / r : 0.0;
-		x = v + j * h * h;
+		guess = v + j * h * h;
 	}
 	const struct fit_problem p = { v, 0.0, false, L, a, j };
 	double dd;
 	if (fit_excess(&p, hi, &dd) <= 0)
 		return hi; /* not reached: a jerk limit only lengthens it */
-	return fit_solve(&p, v, hi, x);
+	return fit_solve(&p, v, hi, guess);
 }
 
 static void trans_init(struct trans *t, double va, double vb, double a, double j,
@@ -192,10 +192,10 @@ double plan_peak(const struct seg *g, double v0, double v1, bool jerk)
 		 * then the distance is vp^2/a + vp a/j + k, a quadratic */
 		double k = -(v0 * v0 + v1 * v1) / (2.0 * a) + (v0 + v1) * a / (2.0 * j);
 		double b = a / j, disc = b * b + 4.0 * (L - k) / a;
-		double x = disc > 0 ? 0.5 * a * (sqrt(disc) - b) : vlo;
+		double guess = disc > 0 ? 0.5 * a * (sqrt(disc) - b) : vlo;
 		const struct fit_problem p = { v0, v1, true, L, a, j };
 		double dd;
-		vp = fit_excess(&p, vlo, &dd) <= 0 ? fit_solve(&p, vlo, g->vmax, x) : vlo;
+		vp = fit_excess(&p, vlo, &dd) <= 0 ? fit_solve(&p, vlo, g->vmax, guess) : vlo;
 	}
 	if (vp < vlo)
 		vp = vlo;
