@@ -88,30 +88,37 @@ static double fit_solve(const struct fit_problem *p, double lo, double hi, doubl
 	return lo;
 }
 
+/* The end speed of a jerk-limited transition from v over exactly L, in
+ * closed form: a transition that reaches a (speed change at least
+ * c = a^2/j) is a quadratic in the end speed; a shorter one ends at
+ * v + j h^2 with j h^3 + 2 v h = L (h: half its duration), a cubic whose
+ * real root Cardano's formula gives.  Rounding can put it a few ulp on
+ * either side of the true speed; it is a starting point for fit_solve(). */
+static double reach_guess(double v, double L, double a, double j)
+{
+	double c = a * a / j;
+
+	if (L >= (2.0 * v + c) * a / j) {
+		double d = c - 2.0 * v;
+		return 0.5 * (sqrt(d * d + 8.0 * a * L) - c);
+	}
+	double q = 0.5 * L / j, pp = 2.0 * v / (3.0 * j);
+	double r = cbrt(q + sqrt(q * q + pp * pp * pp));
+	double h = r > 0 ? r - pp / r : 0.0;
+	return v + j * h * h;
+}
+
 double plan_reach(double v, double L, double a, double j, bool jerk)
 {
 	double hi = sqrt(v * v + 2.0 * a * L);
 
 	if (!jerk || L <= 0)
 		return hi;
-	/* first guess, closed form: a transition that reaches a (speed
-	 * change at least c = a^2/j) is a quadratic in the end speed; a
-	 * shorter one is v + j x^2 with j x^3 + 2 v x = L, x its half time */
-	double c = a * a / j, guess;
-	if (L >= (2.0 * v + c) * a / j) {
-		double d = c - 2.0 * v;
-		guess = 0.5 * (sqrt(d * d + 8.0 * a * L) - c);
-	} else {
-		double q = 0.5 * L / j, pp = 2.0 * v / (3.0 * j);
-		double r = cbrt(q + sqrt(q * q + pp * pp * pp));
-		double h = r > 0 ? r - pp / r : 0.0;
-		guess = v + j * h * h;
-	}
 	const struct fit_problem p = { v, 0.0, false, L, a, j };
 	double dd;
 	if (fit_excess(&p, hi, &dd) <= 0)
 		return hi; /* not reached: a jerk limit only lengthens it */
-	return fit_solve(&p, v, hi, guess);
+	return fit_solve(&p, v, hi, reach_guess(v, L, a, j));
 }
 
 static void trans_init(struct trans *t, double va, double vb, double a, double j,
@@ -188,11 +195,9 @@ double plan_peak(const struct seg *g, double v0, double v1, bool jerk)
 			   plan_trans_dist(g->vmax, v1, a, j, true) <= L) {
 		vp = g->vmax;
 	} else {
-		/* first guess: both transitions reach the acceleration limit,
-		 * then the distance is vp^2/a + vp a/j + k, a quadratic */
-		double k = -(v0 * v0 + v1 * v1) / (2.0 * a) + (v0 + v1) * a / (2.0 * j);
-		double b = a / j, disc = b * b + 4.0 * (L - k) / a;
-		double guess = disc > 0 ? 0.5 * a * (sqrt(disc) - b) : vlo;
+		/* first guess: with equal entry and exit speeds u the peak is
+		 * reached from u over half the length; take u as their mean */
+		double guess = reach_guess(0.5 * (v0 + v1), 0.5 * L, a, j);
 		const struct fit_problem p = { v0, v1, true, L, a, j };
 		double dd;
 		vp = fit_excess(&p, vlo, &dd) <= 0 ? fit_solve(&p, vlo, g->vmax, guess) : vlo;
