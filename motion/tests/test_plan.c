@@ -32,44 +32,46 @@ static double lrand(double lo, double hi)
 	return lo * pow(hi / lo, urand());
 }
 
-/* The reference: 200 bisection steps, keeping the feasible end. */
-static double ref_reach(double v, double L, double a, double j)
+/* Distance of the transition u0 -> w, plus w -> u1 when `both`. */
+static double ref_dist(double u0, double w, double u1, bool both, double a, double j)
 {
-	double lo = v, hi = sqrt(v * v + 2.0 * a * L);
+	double d = plan_trans_dist(u0, w, a, j, true);
 
+	return both ? d + plan_trans_dist(w, u1, a, j, true) : d;
+}
+
+/* The reference: up to 200 bisection steps over [lo, hi], keeping the
+ * end whose transitions fit in L. */
+static double ref_bisect(double u0, double u1, bool both, double lo, double hi,
+			 double L, double a, double j)
+{
 	for (int i = 0; i < 200 && hi > lo; i++) {
 		double mid = 0.5 * (lo + hi);
 		if (mid <= lo || mid >= hi)
 			break;
-		if (plan_trans_dist(v, mid, a, j, true) <= L)
+		if (ref_dist(u0, mid, u1, both, a, j) <= L)
 			lo = mid;
 		else
 			hi = mid;
 	}
 	return lo;
+}
+
+static double ref_reach(double v, double L, double a, double j)
+{
+	return ref_bisect(v, 0.0, false, v, sqrt(v * v + 2.0 * a * L), L, a, j);
 }
 
 static double two(double v0, double vp, double v1, double a, double j)
 {
-	return plan_trans_dist(v0, vp, a, j, true) + plan_trans_dist(vp, v1, a, j, true);
+	return ref_dist(v0, vp, v1, true, a, j);
 }
 
 static double ref_peak(double v0, double v1, double vmax, double L, double a, double j)
 {
-	double lo = v0 > v1 ? v0 : v1, hi = vmax;
-
 	if (two(v0, vmax, v1, a, j) <= L)
 		return vmax;
-	for (int i = 0; i < 200 && hi > lo; i++) {
-		double mid = 0.5 * (lo + hi);
-		if (mid <= lo || mid >= hi)
-			break;
-		if (two(v0, mid, v1, a, j) <= L)
-			lo = mid;
-		else
-			hi = mid;
-	}
-	return lo;
+	return ref_bisect(v0, v1, true, v0 > v1 ? v0 : v1, vmax, L, a, j);
 }
 
 #define CLOSE(x, ref) (fabs((x) - (ref)) <= 1e-9 * (fabs(ref) > 1.0 ? fabs(ref) : 1.0))
