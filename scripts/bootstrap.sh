@@ -11,6 +11,16 @@ cd "$here"
 scope=${SERVOAMP_BOOTSTRAP:-all}
 
 log() { printf '[bootstrap] %s\n' "$*"; }
+# apt's and pip's own output goes to this log; its tail is shown on failure
+blog=$here/build/bootstrap.log
+mkdir -p "$here/build"
+quiet() {
+	if ! "$@" >>"$blog" 2>&1; then
+		tail -n 30 "$blog" >&2
+		log "failed: $* (whole log: $blog)"
+		return 1
+	fi
+}
 sudo_cmd=""
 [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
 
@@ -49,15 +59,15 @@ if [ ${#missing[@]} -gt 0 ] || [ $need_qemu -eq 1 ]; then
 		fi
 	fi
 	log "apt-get update"
-	$sudo_cmd apt-get update -qq || log "apt-get update reported errors; continuing"
+	quiet $sudo_cmd apt-get update -q || log "apt-get update reported errors; continuing (log: $blog)"
 	if [ ${#missing[@]} -gt 0 ]; then
 		log "installing: ${missing[*]}"
-		DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+		quiet $sudo_cmd env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
 	fi
 	if [ $need_qemu -eq 1 ]; then
 		log "installing qemu-system-arm from bookworm-backports"
-		DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends \
-			-t bookworm-backports qemu-system-arm >/dev/null
+		quiet $sudo_cmd env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends \
+			-t bookworm-backports qemu-system-arm
 	fi
 fi
 
@@ -67,15 +77,15 @@ stamp="$venv/.servoamp-stamp"
 key=$(cat pyproject.toml | sha256sum | cut -d' ' -f1)
 if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$key" ]; then
 	log "creating Python environment in .venv"
-	python3 -m venv "$venv"
-	"$venv/bin/python" -m pip install -q --upgrade pip >/dev/null
-	"$venv/bin/python" -m pip install -q -e ".[dev]"
+	quiet python3 -m venv "$venv"
+	quiet "$venv/bin/python" -m pip install --upgrade pip
+	quiet "$venv/bin/python" -m pip install -e ".[dev]"
 	echo "$key" >"$stamp"
 fi
 # Node: the independent MCAP reader used by tests/recorder (tools/mcap-verify).
 mv_dir="$here/tools/mcap-verify"; mv_key=$(sha256sum "$mv_dir/package-lock.json" | cut -d' ' -f1)
 if command -v npm >/dev/null && { [ ! -d "$mv_dir/node_modules" ] || [ "$(cat "$mv_dir/node_modules/.servoamp-stamp" 2>/dev/null)" != "$mv_key" ]; }; then
 	log "npm ci in tools/mcap-verify"
-	(cd "$mv_dir" && npm ci --no-audit --no-fund --ignore-scripts --loglevel=error >/dev/null) && echo "$mv_key" >"$mv_dir/node_modules/.servoamp-stamp"
+	(cd "$mv_dir" && quiet npm ci --no-audit --no-fund --ignore-scripts --loglevel=error) && echo "$mv_key" >"$mv_dir/node_modules/.servoamp-stamp"
 fi
 log "ready ($scope)"

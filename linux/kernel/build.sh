@@ -120,8 +120,19 @@ done <"$fragment"
 # 4. Build zImage, Module.symvers (modules) and the headers/scripts that an
 #    out-of-tree module needs (modules_prepare).
 log "building zImage modules modules_prepare with -j$jobs (log: $out/build.log)"
-kmake -j"$jobs" zImage modules modules_prepare >"$out/build.log" 2>&1 ||
-	{ tail -30 "$out/build.log" >&2; die "kernel build failed"; }
+# a progress line every 30 s: a clean build takes 3-7 minutes on two cores
+(
+	trap 'exit 0' TERM
+	while sleep 30; do
+		log "building: $(elapsed) s elapsed, $(grep -c '^  CC' "$out/build.log" 2>/dev/null) files compiled (log: $out/build.log)"
+	done
+) &
+ticker=$!
+rc=0
+kmake -j"$jobs" zImage modules modules_prepare >"$out/build.log" 2>&1 || rc=$?
+kill "$ticker" 2>/dev/null || true
+wait "$ticker" 2>/dev/null || true
+[ $rc -eq 0 ] || { tail -30 "$out/build.log" >&2; die "kernel build failed"; }
 [ -f "$out/obj/Module.symvers" ] || die "Module.symvers missing after the build"
 
 cp "$out/obj/arch/arm/boot/zImage" "$out/zImage"

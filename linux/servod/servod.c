@@ -1062,6 +1062,15 @@ static int req_stats(struct out *o, char *msg, size_t n)
 		put(o, "servo.unavailable=1\n");
 		return rc;
 	}
+	/*
+	 * The servo's counters are read through the mailbox after servod's
+	 * own: the number of cycles servod handled or counted as missed in
+	 * between bounds how far apart the two halves of this snapshot are.
+	 */
+	pthread_mutex_lock(&amp_lock);
+	put(o, "stats.skew_cycles=%llu\n",
+	    (unsigned long long)((st.cycles + st.missed_irq) - (c.cycles + c.missed_irq)));
+	pthread_mutex_unlock(&amp_lock);
 	put(o, "servo.state=%s\nservo.fault=0x%08x\nservo.cycles=%u\nservo.missed=%u\nservo.overruns=%u\n",
 	    sstate_name(s.state), s.fault, s.cycles, s.missed, s.overruns);
 	put(o, "servo.cmd_fresh=%u\nservo.cmd_stale=%u\nservo.cmd_torn=%u\nservo.cmd_missed=%u\nservo.cmd_invalid=%u\n",
