@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Install everything servoamp needs, idempotently: Debian packages (with
-# bookworm-backports for QEMU >= 9.1) and a Python virtual environment in
-# .venv with the host tools. Safe to run again; a second run costs seconds.
+# Install everything servoamp needs, idempotently: Debian packages, our own
+# QEMU (emulator/qemu/build.sh, cached; bookworm-backports for its meson)
+# and a Python virtual environment in .venv with the host tools. Safe to run
+# again; a second run costs seconds.
 #
 #   scripts/bootstrap.sh            # everything (host + emulated board)
 #   SERVOAMP_BOOTSTRAP=host scripts/bootstrap.sh   # host tools only
@@ -41,33 +42,23 @@ for p in "${want[@]}"; do
 	dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p")
 done
 
-need_qemu=0
-if [ "$scope" != host ]; then
-	if ! command -v qemu-system-arm >/dev/null ||
-		! qemu-system-arm --version | awk 'NR==1 { split($4, v, "."); exit !(v[1] > 9 || (v[1] == 9 && v[2] >= 1)) }'; then
-		need_qemu=1
-	fi
-fi
+# bookworm-backports (meson >= 1.5 for our QEMU build): the system's sources
+# get one list file with the machine's own mirror.
+bpo_list=/etc/apt/sources.list.d/servoamp-backports.list
+need_bpo=0
+[ "$scope" = host ] || [ -f "$bpo_list" ] || need_bpo=1
 
-if [ ${#missing[@]} -gt 0 ] || [ $need_qemu -eq 1 ]; then
-	if [ $need_qemu -eq 1 ]; then
-		list=/etc/apt/sources.list.d/servoamp-backports.list
-		if [ ! -f "$list" ]; then
-			mirror=$(debian_mirror)
-			log "adding bookworm-backports from $list"
-			echo "deb $mirror bookworm-backports main" | $sudo_cmd tee "$list" >/dev/null
-		fi
+if [ ${#missing[@]} -gt 0 ] || [ $need_bpo -eq 1 ]; then
+	if [ $need_bpo -eq 1 ]; then
+		mirror=$(debian_mirror)
+		log "adding bookworm-backports from $bpo_list"
+		echo "deb $mirror bookworm-backports main" | $sudo_cmd tee "$bpo_list" >/dev/null
 	fi
 	log "apt-get update"
 	quiet $sudo_cmd apt-get update -q || log "apt-get update reported errors; continuing (log: $blog)"
 	if [ ${#missing[@]} -gt 0 ]; then
 		log "installing: ${missing[*]}"
 		quiet $sudo_cmd env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
-	fi
-	if [ $need_qemu -eq 1 ]; then
-		log "installing qemu-system-arm from bookworm-backports"
-		quiet $sudo_cmd env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends \
-			-t bookworm-backports qemu-system-arm
 	fi
 fi
 
@@ -88,4 +79,7 @@ if command -v npm >/dev/null && { [ ! -d "$mv_dir/node_modules" ] || [ "$(cat "$
 	log "npm ci in tools/mcap-verify"
 	(cd "$mv_dir" && quiet npm ci --no-audit --no-fund --ignore-scripts --loglevel=error) && echo "$mv_key" >"$mv_dir/node_modules/.servoamp-stamp"
 fi
+# Our QEMU (Debian's source + emulator/qemu/patches), cached by its inputs:
+# about 10 minutes the first time, a second afterwards.
+[ "$scope" = host ] || emulator/qemu/build.sh
 log "ready ($scope)"

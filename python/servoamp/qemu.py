@@ -108,6 +108,7 @@ class Images:
     dtb: Path
     initramfs: Path
     firmware: tuple[Path, ...] = ()
+    stub_icount: Path | None = None   # park loop without wfe, for -icount (stub.S)
 
 
 def _run(cmd: Sequence[str | Path], **kw: Any) -> subprocess.CompletedProcess[str]:
@@ -135,13 +136,17 @@ def kernel_source(kdir: Path) -> Path:
     raise QemuError(f"{kdir}/info has no src=")
 
 
-def build_stub(board: Board) -> Path:
-    """Assemble the boot stub with the board's addresses."""
+def build_stub(board: Board, park_wfe: bool = True) -> Path:
+    """Assemble the boot stub with the board's addresses: ``stub.bin``
+    (CPU1 parks in wfe, for the host clock) or, with ``park_wfe=False``,
+    ``stub-icount.bin`` (CPU1 polls, for virtual time; see stub.S)."""
     out = board.build_dir
     park = board.addr("load", "park_loop") - board.addr("load", "boot_stub")
+    name = "stub" if park_wfe else "stub-icount"
     _run(
         [
-            "make", "-s", "-C", board.folder / "boot", f"OUT={out}",
+            "make", "-s", "-C", board.folder / "boot", f"OUT={out}", f"STUB={name}",
+            f"PARK_WFE={int(park_wfe)}",
             f"STUB_ADDR={board.addr('load', 'boot_stub'):#x}",
             f"ZIMAGE_ADDR={board.addr('load', 'zimage'):#x}",
             f"DTB_ADDR={board.addr('load', 'dtb'):#x}",
@@ -149,7 +154,7 @@ def build_stub(board: Board) -> Path:
             f"PARK_OFFSET={park:#x}",
         ]
     )
-    return out / "stub.bin"
+    return out / f"{name}.bin"
 
 
 def build_dtb(board: Board, ksrc: Path, initramfs: Path | None = None) -> Path:
@@ -252,9 +257,11 @@ def prepare_images(
             firmware = list(firmware) + rpu_app_firmware(board)
     initramfs = build_initramfs(module, firmware, build_userland())
     stub = build_stub(board)
+    stub_icount = build_stub(board, park_wfe=False)
     dtb = build_dtb(board, kernel_source(kdir), initramfs)
     return Images(
-        stub=stub, zimage=kdir / "zImage", dtb=dtb, initramfs=initramfs, firmware=tuple(firmware)
+        stub=stub, zimage=kdir / "zImage", dtb=dtb, initramfs=initramfs, firmware=tuple(firmware),
+        stub_icount=stub_icount,
     )
 
 
@@ -263,11 +270,31 @@ def prepare_images(
 # --------------------------------------------------------------------------
 
 
+_QEMU_DIR: Path | None = None
+
+
+def project_qemu() -> Path:
+    """The project's own QEMU (emulator/qemu/build.sh: Debian's source with
+    our patches, cached by its inputs; built on first use), as the folder
+    that holds ``bin/``. ``build/qemu`` links to it."""
+    global _QEMU_DIR
+    if _QEMU_DIR is None:
+        res = subprocess.run([str(REPO / "emulator/qemu/build.sh"), "--print"], text=True,
+                             stdout=subprocess.PIPE)
+        if res.returncode != 0:
+            raise QemuError("emulator/qemu/build.sh failed (its log is named above)")
+        _QEMU_DIR = Path(res.stdout.strip().splitlines()[-1])
+    return _QEMU_DIR
+
+
 def check_qemu(board: Board) -> str:
-    """Path of the QEMU binary; refuses versions older than the board needs."""
-    binary = shutil.which(str(board.qemu["binary"]))
-    if not binary:
-        raise QemuError(f"{board.qemu['binary']} not found: run scripts/bootstrap.sh")
+    """Path of the QEMU binary: $SERVOAMP_QEMU when set, else the project's
+    own build (:func:`project_qemu`); refuses versions older than the board
+    needs."""
+    name = str(board.qemu["binary"])
+    binary = os.environ.get("SERVOAMP_QEMU") or str(project_qemu() / "bin" / name)
+    if not os.access(binary, os.X_OK):
+        raise QemuError(f"{binary}: not an executable QEMU")
     out = _run([binary, "--version"]).stdout
     m = re.search(r"version (\d+)\.(\d+)", out)
     want = tuple(int(x) for x in str(board.qemu["min_version"]).split("."))
@@ -276,10 +303,39 @@ def check_qemu(board: Board) -> str:
     return binary
 
 
-def qemu_args(board: Board, images: Images, serials: Sequence[str], accel: str | None = None) -> list[str]:
+CLOCKS = ("virtual", "host")
+
+
+def default_clock() -> str:
+    """``virtual`` (instruction-counted guest time, the default) or ``host``
+    ($SERVOAMP_CLOCK=host: guest time follows the host clock)."""
+    clock = os.environ.get("SERVOAMP_CLOCK", "virtual")
+    if clock not in CLOCKS:
+        raise QemuError(f"SERVOAMP_CLOCK={clock!r}: expected one of {', '.join(CLOCKS)}")
+    return clock
+
+
+def clock_args(board: Board, clock: str | None = None, icount: str | None = None) -> list[str]:
+    """QEMU's time-base arguments. ``virtual``: ``-icount`` with the board's
+    spec (board.yaml qemu.clock; ``icount`` overrides it) and the RTC on
+    virtual time, so guest time advances with the instructions executed and
+    host load cannot make the guest miss a cycle. ``host``: none (QEMU's
+    default, guest time = host time)."""
+    clock = clock or default_clock()
+    if clock not in CLOCKS:
+        raise QemuError(f"clock {clock!r}: expected one of {', '.join(CLOCKS)}")
+    if clock == "host":
+        return []
+    c = board.qemu["clock"]
+    return ["-icount", icount or str(c["icount"]), "-rtc", str(c["rtc"])]
+
+
+def qemu_args(board: Board, images: Images, serials: Sequence[str], accel: str | None = None,
+              clock: str | None = None, icount: str | None = None) -> list[str]:
     """The QEMU arguments (without the binary) for a boot of ``board``.
 
-    ``serials``: one ``-serial`` value per UART, in board order.
+    ``serials``: one ``-serial`` value per UART, in board order; ``clock``
+    and ``icount``: see :func:`clock_args`.
     """
     q = board.qemu
     stub = board.addr("load", "boot_stub")
@@ -287,12 +343,18 @@ def qemu_args(board: Board, images: Images, serials: Sequence[str], accel: str |
         "-M", str(q["machine"]), "-smp", str(q["smp"]), "-m", str(q["memory"]),
         "-display", "none", "-nodefaults",
     ]
+    timebase = clock_args(board, clock, icount)
+    if timebase and accel and "thread=multi" in accel:
+        raise QemuError("virtual time (-icount) needs single-threaded TCG; use the host clock for thread=multi")
     if accel:
         args += ["-accel", accel]
+    args += timebase
     for s in serials:
         args += ["-serial", s]
+    if timebase and images.stub_icount is None:
+        raise QemuError("virtual time needs the boot stub without wfe (prepare_images builds it)")
     loads = [
-        (images.stub, stub),
+        (images.stub_icount if timebase else images.stub, stub),
         (images.zimage, board.addr("load", "zimage")),
         (images.dtb, board.addr("load", "dtb")),
         (images.initramfs, board.addr("load", "initramfs")),
@@ -506,6 +568,8 @@ class QemuMachine:
     accel: str | None = None
     extra_args: Sequence[str] = ()
     keep_logs: bool = False
+    clock: str | None = None          # "virtual" (default) or "host": see clock_args()
+    icount: str | None = None         # -icount spec instead of the board's
     uarts: list[Uart] = field(default_factory=list)
     _proc: subprocess.Popen[bytes] | None = None
     _qmp: Qmp | None = None
@@ -539,7 +603,7 @@ class QemuMachine:
                 f"socket,id=uart{i},host=127.0.0.1,port={port},server=off,nodelay=on",
             ]
             serials.append(f"chardev:uart{i}")
-        args = chardevs + qemu_args(self.board, self.images, serials, self.accel)
+        args = chardevs + qemu_args(self.board, self.images, serials, self.accel, self.clock, self.icount)
         args += ["-qmp", f"unix:{qmp_path},server=on,wait=off"]
         args += list(self.extra_args)
         cmd = [binary] + args
@@ -696,14 +760,14 @@ def run_shell(console: Uart, command: str, prompt: str, timeout: float = 20.0) -
 
 
 def interactive(board: Board, images: Images, accel: str | None = None, uart1_log: Path | None = None,
-                extra_args: Sequence[str] = ()) -> int:
+                extra_args: Sequence[str] = (), clock: str | None = None, icount: str | None = None) -> int:
     """Boot with UART0 (and the QEMU monitor: Ctrl-A c) on this terminal and
     UART1 in a log file; return QEMU's exit code."""
     binary = check_qemu(board)
     uart1_log = uart1_log or (REPO / "build" / "qemu" / "uart1.log")
     uart1_log.parent.mkdir(parents=True, exist_ok=True)
     serials = ["mon:stdio", f"file:{uart1_log}"]
-    cmd = [binary] + qemu_args(board, images, serials, accel) + list(extra_args)
+    cmd = [binary] + qemu_args(board, images, serials, accel, clock, icount) + list(extra_args)
     _log("UART0 (Linux console) on this terminal; Ctrl-A x quits, Ctrl-A c is the monitor")
     _log(f"UART1 (servo core) in {uart1_log}")
     return subprocess.call(cmd)

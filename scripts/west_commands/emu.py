@@ -47,8 +47,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("-b", "--board", default="zynq7000_qemu", help="board folder under boards/ (default: %(default)s)")
     parser.add_argument("--accel", default=None, help="QEMU -accel value, e.g. 'tcg,thread=single' (default: QEMU's, multi-threaded TCG)")
     parser.add_argument("--icount", default=None, metavar="SPEC",
-                        help="QEMU -icount value, e.g. 'shift=0,sleep=off' (deterministic guest time: one "
-                             "instruction = 2^shift ns; no cycle is lost to host scheduling; see docs/cycle.md)")
+                        help="QEMU -icount value instead of the board's (board.yaml qemu.clock; guest time "
+                             "counts instructions: one = 2^shift ns; see docs/cycle.md)")
+    parser.add_argument("--host-clock", action="store_true",
+                        help="guest time follows the host clock instead (no -icount; interactive use; "
+                             "host load then costs the guest cycles)")
     parser.add_argument("--firmware", action="append", type=Path, default=None, metavar="ELF",
                         help="ELF to put in /lib/firmware (repeatable; default: test fixtures + rpu_app)")
     parser.add_argument("--no-rpu-app", action="store_true", help="do not build or include rpu_app")
@@ -92,17 +95,22 @@ def run(args: argparse.Namespace) -> int:
     if args.script:
         commands += [ln for ln in args.script.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     nic, host_port = net_args(board, args.net)
-    extra = (["-icount", args.icount] if args.icount else []) + nic
+    extra = nic
+    if args.host_clock and args.icount:
+        raise qemu.QemuError("--icount and --host-clock exclude each other")
+    clock = "host" if args.host_clock else None
+    print(f"[emu] clock: {' '.join(qemu.clock_args(board, clock, args.icount)) or 'host'}")
     if not commands:
         if host_port is not None:
             print(f"[emu] in the guest, bring eth0 up with: servoamp-net {board.data['network']['guest_addr']}")
-        return qemu.interactive(board, images, accel=args.accel, extra_args=extra)
+        return qemu.interactive(board, images, accel=args.accel, extra_args=extra, clock=clock, icount=args.icount)
     return scripted(board, images, commands, args, extra, net=host_port is not None)
 
 
 def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: argparse.Namespace,
              extra: list[str], net: bool = False) -> int:
-    machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs, extra_args=extra)
+    machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs, extra_args=extra,
+                               clock="host" if args.host_clock else None, icount=args.icount)
     failed = 0
     with machine:
         times = qemu.boot_to_shell(machine, timeout=args.timeout)

@@ -46,7 +46,7 @@ END = (0, 0, 0)                 # the program's end point, increments
 PATH_ERR_MAX_UM = 60.0
 FOLLOW_ERR_MAX_UM = 300.0
 END_TOL_INC = 3
-RECORD_S = 9.0
+RECORD_MAX_S = 120.0            # upper bound; the recording stops when the program is done
 
 
 def _kv(out: str) -> dict[str, str]:
@@ -93,9 +93,12 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         out["bad_st2"] = _status(cb)
 
         # 2. the seed 004 program, recorded
+        # recorded until the program is done (its length in host time grows
+        # with the cycles the host makes the guest miss), not for a fixed time
         box: dict[str, RecordResult] = {}
+        stop_rec = threading.Event()
         th = threading.Thread(target=lambda: box.update(
-            r=record("127.0.0.1", cb.host_port, out["path"], RECORD_S)))
+            r=record("127.0.0.1", cb.host_port, out["path"], RECORD_MAX_S, stop=stop_rec)))
         th.start()
         time.sleep(0.5)
         out["run_rc"], out["run_out"] = cb.sh_rc(f"ampctl run {SEED004} 2>&1", timeout=30)
@@ -105,7 +108,8 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         time.sleep(0.5)
         out["end_st"] = _status(cb)
         out["stats"] = cb.stats()
-        th.join(timeout=RECORD_S + 30)
+        stop_rec.set()
+        th.join(timeout=30)
         assert not th.is_alive()
         out["res"] = box["r"]
 
@@ -204,7 +208,8 @@ def test_recording_shows_the_square_and_the_circle(run: dict[str, Any]) -> None:
             cy.append(per[c][1]["command"]["target_pos"])
             ax.append(per[c][0]["feedback"]["actual_pos"])
             ay.append(per[c][1]["feedback"]["actual_pos"])
-    assert res.cycles > 5000
+    # every setpoint of the program is on record (plus the approach and the rest)
+    assert res.cycles >= int(run["done_st"]["program.planned_setpoints"]), res.cycles
     # The program's first block moves from wherever the axes hold (where the
     # sine left them when the malformed program was refused: anywhere) to
     # the origin; the shape is what follows the first arrival there.

@@ -54,13 +54,20 @@ def test_servo_dts_agrees(board: qemu.Board) -> None:
     assert re.search(rf"reg\s*=\s*<\s*{c['base']:#010x}\s+{c['size']:#010x}\s*>", text), "carveout differs in servo.dts"
 
 
-def test_boot_stub_park_loop_address(board: qemu.Board) -> None:
-    qemu.build_stub(board)
-    nm = subprocess.run(["arm-none-eabi-nm", str(board.build_dir / "stub.elf")], capture_output=True, text=True, check=True).stdout
+@pytest.mark.parametrize("park_wfe", [True, False], ids=["wfe", "icount"])
+def test_boot_stub_park_loop_address(board: qemu.Board, park_wfe: bool) -> None:
+    """Both stubs (CPU1 parked in wfe for the host clock, polling for
+    -icount) keep the park loop at the contract address."""
+    binary = qemu.build_stub(board, park_wfe=park_wfe)
+    nm = subprocess.run(["arm-none-eabi-nm", str(binary.with_suffix(".elf"))], capture_output=True, text=True,
+                        check=True).stdout
     syms = {ln.split()[2]: int(ln.split()[0], 16) for ln in nm.splitlines() if len(ln.split()) == 3}
     assert syms["_start"] == board.addr("load", "boot_stub")
     assert syms["park"] == board.addr("load", "park_loop")
-    assert (board.build_dir / "stub.bin").stat().st_size <= 4096
+    assert binary.stat().st_size <= 4096
+    dis = subprocess.run(["arm-none-eabi-objdump", "-d", str(binary.with_suffix(".elf"))], capture_output=True,
+                         text=True, check=True).stdout
+    assert ("\twfe" in dis) == park_wfe
 
 
 def test_bindings_validate() -> None:

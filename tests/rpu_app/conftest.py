@@ -75,11 +75,11 @@ def board_cfg(rpu_build) -> dict[str, int]:
 
 
 def qemu_ok() -> str | None:
-    q = shutil.which("qemu-system-arm")
-    if not q:
-        return "qemu-system-arm missing: run scripts/bootstrap.sh"
-    out = subprocess.run([q, "--version"], capture_output=True, text=True).stdout
-    m = re.search(r"version (\d+)\.(\d+)", out)
-    if not m or (int(m.group(1)), int(m.group(2))) < (9, 1):
-        return f"qemu-system-arm >= 9.1 needed (-smp 2 on xilinx-zynq-a9), found: {out.splitlines()[0] if out else '?'}"
+    """None when the project's QEMU is there (built on first use), else why not."""
+    from qemu_rpu import qemu_binary
+    from servoamp.qemu import QemuError
+    try:
+        qemu_binary()
+    except QemuError as e:
+        return f"no usable QEMU: {e}"
     return None

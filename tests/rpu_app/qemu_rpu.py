@@ -25,7 +25,13 @@ import subprocess
 import time
 from pathlib import Path
 
-QEMU = shutil.which("qemu-system-arm") or "qemu-system-arm"
+
+
+def qemu_binary() -> str:
+    """The same QEMU as every board run: the project's own build
+    (servoamp.qemu.check_qemu; $SERVOAMP_QEMU overrides it)."""
+    from servoamp import qemu
+    return qemu.check_qemu(qemu.Board.load("zynq7000_qemu"))
 
 
 def _connect_unix(path: str, timeout: float) -> socket.socket:
@@ -215,7 +221,7 @@ class QemuRpu:
             if p.exists():
                 p.unlink()
         self.argv = [
-            QEMU, "-M", "xilinx-zynq-a9", "-smp", "2", "-m", "512M",
+            qemu_binary(), "-M", "xilinx-zynq-a9", "-smp", "2", "-m", "512M",
             "-display", "none", "-nodefaults",
             "-chardev", "null,id=uart0",
             "-chardev", f"file,id=uart1,path={self.uart1}",

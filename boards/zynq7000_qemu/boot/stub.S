@@ -18,8 +18,18 @@
  *       entry there, dsb, sev; a firmware returns here on a stop request.
  *
  * Build-time parameters (from board.yaml, see Makefile): ZIMAGE_ADDR,
- * DTB_ADDR, ARM_PLL_CTRL_VALUE, PARK_OFFSET.
+ * DTB_ADDR, ARM_PLL_CTRL_VALUE, PARK_OFFSET; PARK_WFE (default 1).
+ *
+ * PARK_WFE=1: the park loop waits in wfe between polls, as the boot ROM
+ * does (with guest time on the host clock, a parked CPU1 costs no host
+ * time). PARK_WFE=0: it polls without wfe. Under -icount QEMU's wfe only
+ * yields to the other vCPU, so a parked CPU1 never lets virtual time warp
+ * to the next timer event and the guest crawls (`sleep 1` took 40 s);
+ * plain polling advances virtual time with every instruction instead.
  */
+#ifndef PARK_WFE
+#define PARK_WFE 1
+#endif
 #ifndef ZIMAGE_ADDR
 #error "ZIMAGE_ADDR not set"
 #endif
@@ -72,7 +82,9 @@ _start:
 	.org	PARK_OFFSET
 	.global park
 park:
+#if PARK_WFE
 	wfe
+#endif
 	mvn	r3, #0xf			@ r3 = 0xfffffff0, the boot register
 	ldr	r3, [r3]
 	cmp	r3, #0

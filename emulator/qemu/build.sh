@@ -1,0 +1,264 @@
+#!/usr/bin/env bash
+# Build servoamp's own qemu-system-arm 10.0.2 (Debian's source, with the
+# patches in patches/: a Cadence TTC fix so the Zynq-7000 board runs under
+# -icount without livelocking, and its qtest).
+#
+#   emulator/qemu/build.sh            # build or reuse the cached QEMU
+#   emulator/qemu/build.sh --print    # same, then print the install directory
+#
+# Use: PATH="$(emulator/qemu/build.sh --print)/bin:$PATH"
+#
+# Source: the upstream tarball Debian ships as qemu_10.0.2+ds.orig.tar.xz
+# (bookworm-backports). It is located with `apt-get source --print-uris`
+# through a private APT configuration (its own deb-src list, lists and cache
+# under the cache directory; the system's apt configuration is not touched)
+# and fetched with apt's own downloader, which checks its SHA256. The mirror
+# is the one this machine's apt already uses (scripts/lib/debian-mirror.sh).
+# The .dsc and .debian.tar.xz are not needed (and may answer 404).
+#
+# Cache: ${SERVOAMP_CACHE:-$HOME/.cache/servoamp}/
+#   qemu-src/qemu_10.0.2+ds.orig.tar.xz   downloaded once (shared)
+#   qemu-src/apt/                         the private APT state
+#   qemu/<key>/bin/qemu-system-arm        the install (prefix)
+#   qemu/<key>/libexec/servoamp/          the qtest regression test binary
+#   qemu/<key>/info, build.log, ok        results (ok = complete, the
+#                                         regression test passed)
+#   qemu/<key>/src, build                 patched source and build tree, removed
+#                                         after a successful build unless
+#                                         SERVOAMP_QEMU_KEEP_BUILD=1
+# key = sha256(tarball name and SHA256, every patch, the configure options,
+# this script), 16 hex digits.
+#
+# Build dependencies come from Debian and are installed when missing
+# (meson >= 1.5 and python3-pycotap from bookworm-backports, which
+# scripts/bootstrap.sh adds to the system's apt sources).
+#
+# Environment: SERVOAMP_CACHE, SERVOAMP_JOBS (default 2), SERVOAMP_KEEP
+# (complete builds kept, default 2), SERVOAMP_QEMU_KEEP_BUILD.
+set -euo pipefail
+
+here=$(cd "$(dirname "$0")" && pwd)
+repo=$(cd "$here/../.." && pwd)
+cache=${SERVOAMP_CACHE:-$HOME/.cache/servoamp}
+jobs=${SERVOAMP_JOBS:-2}
+print_dir=0
+[ "${1:-}" = --print ] && print_dir=1
+
+version=10.0.2
+orig=qemu_${version}+ds.orig.tar.xz
+orig_sha256=0901da33844a331bf8b3602b9c1fbd178e60b737c8e3ade678255bd090c9b9f1
+suite=bookworm-backports
+# Debian's python3 (not whatever python3 is first on PATH): configure's venv
+# must see Debian's meson and pycotap in its system site-packages.
+python=/usr/bin/python3
+
+# configure options (the prefix is added below; it depends on the key)
+config_opts=(
+	--target-list=arm-softmmu
+	--python=$python
+	--disable-download
+	--without-default-features
+	--enable-slirp
+	--enable-fdt=system
+	--enable-pixman
+	--disable-install-blobs
+	--disable-debug-info
+	--disable-docs
+	--disable-tools
+	--disable-guest-agent
+	--disable-user
+)
+# ninja targets: the emulator, what `meson install` needs, the regression qtest
+targets=(qemu-system-arm trace/trace-events-all tests/qtest/cadence-ttc-test)
+
+log() { printf '[qemu] %s\n' "$*" >&2; }
+die() { printf '[qemu] error: %s\n' "$*" >&2; exit 1; }
+
+t0=$(date +%s.%N)
+elapsed() { echo "$(date +%s.%N) $t0" | awk '{ printf "%.1f", $1 - $2 }'; }
+
+# 1. Build dependencies (Debian packages; the -dev packages also bring the
+#    libraries qemu-system-arm runs with), installed only when missing.
+need_pkgs=(gcc pkg-config ninja-build python3-venv libglib2.0-dev
+	libpixman-1-dev libslirp-dev zlib1g-dev libfdt-dev xz-utils bzip2 patch)
+installed() { [ "$(dpkg-query -W -f='${db:Status-Status}' "$1" 2>/dev/null)" = installed ]; }
+missing=() bpo_missing=()
+for p in "${need_pkgs[@]}"; do installed "$p" || missing+=("$p"); done
+installed python3-pycotap || bpo_missing+=(python3-pycotap)
+if ! installed meson || ! dpkg --compare-versions "$(dpkg-query -W -f='${Version}' meson)" ge 1.5; then
+	bpo_missing+=(meson)
+fi
+if [ ${#missing[@]} -gt 0 ] || [ ${#bpo_missing[@]} -gt 0 ]; then
+	sudo_cmd=""
+	[ "$(id -u)" -eq 0 ] || sudo_cmd=sudo
+	log "installing build dependencies: ${missing[*]} ${bpo_missing[*]}"
+	$sudo_cmd apt-get update -qq >/dev/null || log "apt-get update reported errors; trying the install anyway"
+	if [ ${#missing[@]} -gt 0 ]; then
+		DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends \
+			"${missing[@]}" >/dev/null || die "apt-get install ${missing[*]} failed"
+	fi
+	if [ ${#bpo_missing[@]} -gt 0 ]; then
+		policy=$(apt-cache policy meson)
+		grep -q "$suite" <<<"$policy" ||
+			die "$suite is not in the system's apt sources (meson >= 1.5 is there): run scripts/bootstrap.sh"
+		DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends \
+			-t "$suite" "${bpo_missing[@]}" >/dev/null || die "apt-get install -t $suite ${bpo_missing[*]} failed"
+	fi
+fi
+
+# 2. Key and cache layout.
+patches=()
+for p in "$here"/patches/*.patch; do [ -e "$p" ] && patches+=("$p"); done
+key=$({
+	printf '%s %s\n' "$orig" "$orig_sha256"
+	for p in "${patches[@]}"; do printf '%s ' "$(basename "$p")"; sha256sum <"$p"; done
+	printf '%s\n' "${config_opts[*]}" "${targets[*]}"
+	sha256sum <"$0"
+} | sha256sum | cut -c1-16)
+srcdir=$cache/qemu-src
+out=$cache/qemu/$key
+
+publish() {
+	[ $print_dir -eq 1 ] && printf '%s\n' "$out"
+	return 0
+}
+
+mkdir -p "$cache/qemu" "$srcdir"
+exec 9>"$cache/qemu/.lock"
+flock 9
+
+if [ -f "$out/ok" ]; then
+	log "cached: $out ($(elapsed) s)"
+	publish
+	exit 0
+fi
+
+# 3. The orig tarball, downloaded once through a private APT configuration.
+if [ ! -f "$srcdir/$orig" ] || ! echo "$orig_sha256  $srcdir/$orig" | sha256sum -c --status; then
+	# shellcheck source=../../scripts/lib/debian-mirror.sh
+	. "$repo/scripts/lib/debian-mirror.sh"
+	mirror=$(debian_mirror) || die "cannot read the Debian mirror from /etc/apt"
+	apt_dir=$srcdir/apt
+	mkdir -p "$apt_dir/lists/partial" "$apt_dir/cache/archives/partial" "$apt_dir/sources.list.d"
+	printf 'deb-src %s %s main\n' "$mirror" "$suite" >"$apt_dir/sources.list"
+	apt_opts=(
+		-o "Dir::Etc::SourceList=$apt_dir/sources.list"
+		-o "Dir::Etc::SourceParts=$apt_dir/sources.list.d"
+		-o "Dir::State::Lists=$apt_dir/lists"
+		-o "Dir::Cache=$apt_dir/cache"
+		-o "APT::Sandbox::User=root"
+	)
+	log "locating $orig ($suite sources, private APT configuration)"
+	apt-get "${apt_opts[@]}" update -qq >&2 || die "apt-get update (private $suite deb-src list) failed"
+	line=$(apt-get "${apt_opts[@]}" source --print-uris qemu 2>/dev/null | grep -F " $orig " || true)
+	[ -n "$line" ] || die "$orig is not in $suite's qemu source package (any more?): $(apt-get "${apt_opts[@]}" source --print-uris qemu 2>&1 | grep -o "qemu_[^ ]*orig[^ ]*" | head -1)"
+	read -r uri name size hash <<<"$line"
+	uri=${uri//\'/}
+	[ "$hash" = "SHA256:$orig_sha256" ] || die "$orig: the archive says $hash, expected SHA256:$orig_sha256"
+	log "downloading $orig ($((size / 1048576)) MB)"
+	rm -f "$srcdir/$orig.part"
+	/usr/lib/apt/apt-helper "${apt_opts[@]}" download-file "$uri" "$srcdir/$orig.part" "$hash" >&2 ||
+		die "download of $orig failed"
+	mv "$srcdir/$orig.part" "$srcdir/$orig"
+fi
+
+# 4. Extract (without roms/: firmware sources, 269 MB, not used), patch and
+#    configure. An interrupted build of the same key resumes from its
+#    configured build tree.
+buildlog=$out/build.log
+prepare_tree() {
+	rm -rf "$out"
+	mkdir -p "$out/src.tmp"
+	log "extracting $orig and applying ${#patches[@]} patches (log: $buildlog)"
+	tar -xJf "$srcdir/$orig" -C "$out/src.tmp" --exclude="qemu-$version/roms/*/*"
+	mv "$out/src.tmp/qemu-$version" "$out/src"
+	rmdir "$out/src.tmp"
+	for p in "${patches[@]}"; do
+		printf '== patch %s\n' "$(basename "$p")" >>"$buildlog"
+		patch -d "$out/src" -p1 --forward --batch <"$p" >>"$buildlog" 2>&1 ||
+			{ tail -20 "$buildlog" >&2; die "patch $(basename "$p") does not apply"; }
+	done
+
+	# The "+ds" tarball has no prebuilt firmware (pc-bios/*.bz2, *.bin).
+	# QEMU's meson.build lists the edk2 images as inputs of build targets
+	# whenever bzip2 is installed and an edk2 target (arm-softmmu is one)
+	# is configured: give it empty compressed stand-ins. They are never
+	# installed (--disable-install-blobs); this board needs no firmware.
+	local f
+	for f in $(sed -n "s/^ *'\(edk2-[^']*\.fd\)',\$/\1/p" "$out/src/pc-bios/meson.build"); do
+		[ -e "$out/src/pc-bios/$f.bz2" ] || bzip2 -c </dev/null >"$out/src/pc-bios/$f.bz2"
+	done
+
+	log "configuring: ${config_opts[*]}"
+	mkdir -p "$out/build"
+	printf '== configure --prefix=%s %s\n' "$out" "${config_opts[*]}" >>"$buildlog"
+	(cd "$out/build" && ../src/configure --prefix="$out" "${config_opts[@]}") >>"$buildlog" 2>&1 ||
+		{ tail -30 "$buildlog" >&2; die "configure failed"; }
+	touch "$out/build/.servoamp-configured"
+}
+if [ -f "$out/build/.servoamp-configured" ]; then
+	log "resuming the interrupted build in $out/build"
+else
+	prepare_tree
+fi
+
+# 5. Build, with a progress line every 30 s.
+log "building ${targets[*]} with -j$jobs (log: $buildlog)"
+printf '== ninja -j%s %s\n' "$jobs" "${targets[*]}" >>"$buildlog"
+ninja -C "$out/build" -j"$jobs" "${targets[@]}" >>"$buildlog" 2>&1 &
+ninja_pid=$!
+trap 'kill "$ninja_pid" 2>/dev/null || true' EXIT
+tb=$(date +%s)
+while kill -0 "$ninja_pid" 2>/dev/null; do
+	for _ in $(seq 30); do
+		sleep 1
+		kill -0 "$ninja_pid" 2>/dev/null || break
+	done
+	if kill -0 "$ninja_pid" 2>/dev/null; then
+		log "building: $(($(date +%s) - tb)) s elapsed (log: $buildlog)"
+	fi
+done
+wait "$ninja_pid" || { tail -30 "$buildlog" >&2; die "build failed"; }
+trap - EXIT
+
+# 6. Install the emulator (prefix = $out) and the regression test.
+printf '== meson install\n' >>"$buildlog"
+(cd "$out/build" && ./pyvenv/bin/meson install --no-rebuild --quiet) >>"$buildlog" 2>&1 ||
+	{ tail -30 "$buildlog" >&2; die "install failed"; }
+install -D -m 0755 "$out/build/tests/qtest/cadence-ttc-test" "$out/libexec/servoamp/cadence-ttc-test"
+"$out/bin/qemu-system-arm" --version | head -1 | grep -q "version $version" ||
+	die "$out/bin/qemu-system-arm does not run"
+"$out/bin/qemu-system-arm" -M none -netdev help | grep -qx user || die "qemu-system-arm was built without slirp (user networking)"
+log "running the TTC regression test (run-regression-test.sh)"
+printf '== run-regression-test.sh\n' >>"$buildlog"
+"$here/run-regression-test.sh" "$out" >>"$buildlog" 2>&1 ||
+	{ tail -20 "$buildlog" >&2; die "the TTC regression test failed"; }
+
+secs=$(elapsed)
+du_src=$(du -sm "$out/src" | cut -f1)
+du_build=$(du -sm "$out/build" | cut -f1)
+du_total=$(du -sm "$out" | cut -f1)
+{
+	echo "version=$version"
+	echo "key=$key"
+	echo "orig=$orig"
+	echo "orig_sha256=$orig_sha256"
+	for p in "${patches[@]}"; do echo "patch=$(basename "$p")"; done
+	echo "configure=--prefix=$out ${config_opts[*]}"
+	echo "jobs=$jobs"
+	echo "build_seconds=$secs"
+	echo "disk_mb_src=$du_src"
+	echo "disk_mb_build=$du_build"
+	echo "disk_mb_install=$((du_total - du_src - du_build))"
+} >"$out/info"
+if [ "${SERVOAMP_QEMU_KEEP_BUILD:-0}" != 1 ]; then
+	rm -rf "$out/src" "$out/build"
+fi
+touch "$out/ok"
+
+# 7. Prune: keep the newest complete builds.
+ls -td "$cache"/qemu/*/ | tail -n +$((${SERVOAMP_KEEP:-2} + 1)) | while read -r d; do
+	[ "${d%/}" = "$out" ] || rm -rf "${d%/}"
+done
+log "built in $secs s: $out/bin/qemu-system-arm (disk: source $du_src MB, build $du_build MB, install $((du_total - du_src - du_build)) MB)"
+publish

@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Run the Cadence TTC regression qtest (patches/0002, tests/qtest/
+# cadence-ttc-test.c) against a QEMU. Exits 0 when it passes, 1 when it fails,
+# 124 when it times out (the unpatched TTC model livelocks in clock_step, so
+# a hang is the expected failure).
+#
+#   emulator/qemu/run-regression-test.sh                  # the cached build (build.sh --print)
+#   emulator/qemu/run-regression-test.sh DIR              # an install dir (bin/, libexec/servoamp/)
+#                                                         # or a QEMU build dir (SERVOAMP_QEMU_KEEP_BUILD=1)
+#   emulator/qemu/run-regression-test.sh DIR --qemu BIN   # DIR's test binary against another
+#                                                         # qemu-system-arm, e.g. Debian's unpatched
+#                                                         # /usr/bin/qemu-system-arm (same 10.0.2)
+#
+# Environment: SERVOAMP_QEMU_TEST_TIMEOUT (seconds, default 60; the test takes
+# about 2 s on a fixed QEMU).
+set -euo pipefail
+
+here=$(cd "$(dirname "$0")" && pwd)
+log() { printf '[qemu-test] %s\n' "$*" >&2; }
+die() { printf '[qemu-test] error: %s\n' "$*" >&2; exit 2; }
+
+dir="" qemu=""
+while [ $# -gt 0 ]; do
+	case $1 in
+	--qemu) qemu=${2:?--qemu needs a path}; shift 2 ;;
+	-h | --help) sed -n '2,16p' "$0"; exit 0 ;;
+	*) [ -z "$dir" ] || die "one directory only"; dir=$1; shift ;;
+	esac
+done
+[ -n "$dir" ] || dir=$("$here/build.sh" --print)
+dir=$(cd "$dir" && pwd)
+
+test_bin=""
+for t in "$dir/libexec/servoamp/cadence-ttc-test" "$dir/tests/qtest/cadence-ttc-test"; do
+	[ -x "$t" ] && { test_bin=$t; break; }
+done
+[ -n "$test_bin" ] || die "no cadence-ttc-test in $dir (libexec/servoamp/ or tests/qtest/)"
+if [ -z "$qemu" ]; then
+	for q in "$dir/bin/qemu-system-arm" "$dir/qemu-system-arm"; do
+		[ -x "$q" ] && { qemu=$q; break; }
+	done
+fi
+[ -n "$qemu" ] && [ -x "$qemu" ] || die "no qemu-system-arm in $dir (give one with --qemu)"
+
+limit=${SERVOAMP_QEMU_TEST_TIMEOUT:-60}
+out=$(mktemp)
+trap 'rm -f "$out"' EXIT
+log "$test_bin against $qemu ($("$qemu" --version | head -1)), timeout $limit s"
+
+# Own process group, so that a livelocked QEMU (which no longer serves
+# SIGTERM) is killed together with the test on timeout.
+t0=$(date +%s)
+QTEST_QEMU_BINARY=$qemu setsid "$test_bin" --tap -k >"$out" 2>&1 &
+pid=$!
+rc=""
+while [ -z "$rc" ]; do
+	if ! kill -0 "$pid" 2>/dev/null; then
+		set +e; wait "$pid"; rc=$?; set -e
+	elif [ $(($(date +%s) - t0)) -ge "$limit" ]; then
+		kill -KILL -- "-$pid" 2>/dev/null || true
+		wait "$pid" 2>/dev/null || true
+		rc=124
+	else
+		sleep 0.2
+	fi
+done
+cat "$out"
+secs=$(($(date +%s) - t0))
+case $rc in
+0) log "PASS ($secs s)" ;;
+124) log "FAIL: timed out after $limit s (livelock?); the test and its QEMU were killed"; exit 124 ;;
+*) log "FAIL: exit status $rc ($secs s)"; exit 1 ;;
+esac
