@@ -307,9 +307,14 @@ CLOCKS = ("virtual", "host")
 
 
 def default_clock() -> str:
-    """``virtual`` (instruction-counted guest time, the default) or ``host``
-    ($SERVOAMP_CLOCK=host: guest time follows the host clock)."""
-    clock = os.environ.get("SERVOAMP_CLOCK", "virtual")
+    """``host`` (guest time follows the host clock, the default) or
+    ``virtual`` ($SERVOAMP_CLOCK=virtual: instruction-counted guest time).
+
+    Virtual time runs the cycle with zero missed cycles whatever the host
+    load, but is not the default yet: while CPU1 spins (a parked CPU1, or a
+    firmware that busy-polls) Linux on CPU0 can slow to a crawl, which
+    stalls remoteproc stop/start sequences (docs/cycle.md, section 6)."""
+    clock = os.environ.get("SERVOAMP_CLOCK", "host")
     if clock not in CLOCKS:
         raise QemuError(f"SERVOAMP_CLOCK={clock!r}: expected one of {', '.join(CLOCKS)}")
     return clock
@@ -568,7 +573,7 @@ class QemuMachine:
     accel: str | None = None
     extra_args: Sequence[str] = ()
     keep_logs: bool = False
-    clock: str | None = None          # "virtual" (default) or "host": see clock_args()
+    clock: str | None = None          # "host" (default) or "virtual": see clock_args()
     icount: str | None = None         # -icount spec instead of the board's
     uarts: list[Uart] = field(default_factory=list)
     _proc: subprocess.Popen[bytes] | None = None

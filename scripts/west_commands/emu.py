@@ -46,12 +46,12 @@ DESCRIPTION = "build what is missing and boot the emulated board (QEMU)"
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("-b", "--board", default="zynq7000_qemu", help="board folder under boards/ (default: %(default)s)")
     parser.add_argument("--accel", default=None, help="QEMU -accel value, e.g. 'tcg,thread=single' (default: QEMU's, multi-threaded TCG)")
+    parser.add_argument("--virtual-time", action="store_true",
+                        help="guest time counts instructions (-icount, board.yaml qemu.clock) instead of "
+                             "following the host clock: no cycle lost to host load (docs/cycle.md)")
     parser.add_argument("--icount", default=None, metavar="SPEC",
-                        help="QEMU -icount value instead of the board's (board.yaml qemu.clock; guest time "
-                             "counts instructions: one = 2^shift ns; see docs/cycle.md)")
-    parser.add_argument("--host-clock", action="store_true",
-                        help="guest time follows the host clock instead (no -icount; interactive use; "
-                             "host load then costs the guest cycles)")
+                        help="virtual time with this -icount value instead of the board's "
+                             "(one instruction = 2^shift ns)")
     parser.add_argument("--firmware", action="append", type=Path, default=None, metavar="ELF",
                         help="ELF to put in /lib/firmware (repeatable; default: test fixtures + rpu_app)")
     parser.add_argument("--no-rpu-app", action="store_true", help="do not build or include rpu_app")
@@ -96,9 +96,7 @@ def run(args: argparse.Namespace) -> int:
         commands += [ln for ln in args.script.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     nic, host_port = net_args(board, args.net)
     extra = nic
-    if args.host_clock and args.icount:
-        raise qemu.QemuError("--icount and --host-clock exclude each other")
-    clock = "host" if args.host_clock else None
+    clock = "virtual" if (args.virtual_time or args.icount) else None
     print(f"[emu] clock: {' '.join(qemu.clock_args(board, clock, args.icount)) or 'host'}")
     if not commands:
         if host_port is not None:
@@ -109,8 +107,9 @@ def run(args: argparse.Namespace) -> int:
 
 def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: argparse.Namespace,
              extra: list[str], net: bool = False) -> int:
+    clock = "virtual" if (args.virtual_time or args.icount) else None
     machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs, extra_args=extra,
-                               clock="host" if args.host_clock else None, icount=args.icount)
+                               clock=clock, icount=args.icount)
     failed = 0
     with machine:
         times = qemu.boot_to_shell(machine, timeout=args.timeout)
