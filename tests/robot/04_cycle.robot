@@ -129,6 +129,17 @@ Exchange Window
     END
     RETURN    ${r}
 
+Exchange Should Run
+    [Documentation]    The exchange runs: fresh feedback in most cycles servod
+    ...    handled (a handled cycle whose servo half the host descheduled
+    ...    reads stale feedback, counted), whatever the host's load costs in
+    ...    missed cycles (counted by Exchange Window).
+    [Arguments]    ${r}
+    Should Be True    ${r}[linux.exchanges] > 0
+    Should Be True    ${r}[linux.exchanges] + ${r}[linux.fb_stale] <= ${r}[linux.cycles]
+    Should Be True    2 * ${r}[linux.exchanges] > ${r}[linux.cycles]
+    ...    fresh feedback in ${r}[linux.exchanges] of ${r}[linux.cycles] handled cycles
+
 Servo Line Should Say
     [Arguments]    ${state}    ${fault}
     ${s}=    Execute Shell Command    devmem ${SL_STATE} 32
@@ -251,7 +262,7 @@ Stop And Start The Firmware While Servod Runs
     Wait For Servod Log    parameter set loaded    2
     Param Should Be    pos_kp    61.5
     ${r}=    Exchange Window    1
-    Should Be True    ${r}[linux.exchanges] > 800
+    Exchange Should Run    ${r}
 
 Hung Firmware Is Detected And Recovered Without Restarting Servod
     [Documentation]    The hang stops the cycle work and the heartbeat (the
@@ -268,11 +279,17 @@ Hung Firmware Is Detected And Recovered Without Restarting Servod
     ${b}=    Stats
     ${pid2}=    Execute Shell Command    pidof servod
     Should Be Equal    ${pid}    ${pid2}
+    # the hang is detected (a loaded host may add a genuine stall of its
+    # own at wd_limit 10, recovered the same way): every stall servod saw
+    # was recovered, and every recovery re-attached the firmware
     ${stalls}=    Delta    ${a}    ${b}    linux.stalls
-    Should Be Equal As Integers    ${stalls}    1
+    ${rec}=    Delta    ${a}    ${b}    linux.recoveries
+    ${att}=    Delta    ${a}    ${b}    servo.attach_count
+    Should Be True    ${stalls} >= 1
+    Should Be Equal As Integers    ${rec}    ${stalls}
+    Should Be Equal As Integers    ${att}    ${rec}
     Log    hang detected after ${b}[linux.last_stall_cycles] Linux cycles (${b}[linux.last_stall_us] us) of a still heartbeat    console=True
     Should Be True    ${b}[linux.last_stall_cycles] <= 10 + 1
-    Should Be Equal As Integers    ${b}[servo.attach_count]    2
     ${dmesg}=    Execute Shell Command    dmesg | tail -n 20
     Should Contain    ${dmesg}    crash reported by user space (watchdog)
     Should Contain    ${dmesg}    recovering servo-cpu1
@@ -282,7 +299,7 @@ Hung Firmware Is Detected And Recovered Without Restarting Servod
     Param Should Be    wd_limit    10
     Ampctl    param set wd_limit ${K}
     ${r}=    Exchange Window    1
-    Should Be True    ${r}[linux.exchanges] > 800
+    Exchange Should Run    ${r}
     Should Be Equal    ${b}[servo.state]    RUNNING
 
 Crashed Firmware Is Recovered Too
@@ -310,8 +327,9 @@ Timeout Is Reported When The Servo Does Not Answer
     Should Contain    ${out}    did not answer
     Wait For Servod Log    recovery complete    3
     Execute Shell Command    sleep 0.3
-    Param Should Be    wd_limit    1000
-    Ampctl    param set wd_limit ${K}
+    # restored; on a loaded host the first answer may miss ampctl's 200 ms
+    Wait Until Keyword Succeeds    10x    0.3 s    Param Should Be    wd_limit    1000
+    Wait Until Keyword Succeeds    10x    0.3 s    Ampctl    param set wd_limit ${K}
 
 Killing Servod Brings Every Axis To A Safe Stop
     [Documentation]    servod killed (SIGKILL: no close): the servo's watchdog
@@ -320,8 +338,8 @@ Killing Servod Brings Every Axis To A Safe Stop
     ...    why. Read from OCM with devmem (ampctl needs servod) and the
     ...    firmware's diagnostics through the QEMU monitor.
     Execute Shell Command    kill -9 $(pidof servod)
-    Execute Shell Command    sleep 0.5
-    Servo Line Should Say    ${SAFESTOP}    ${FAULT_STALL}
+    # K cycles of guest time; the bound in cycles is checked below
+    Wait Until Keyword Succeeds    20 s    0.3 s    Servo Line Should Say    ${SAFESTOP}    ${FAULT_STALL}
     ${pub}=    Execute Shell Command    devmem 0xffff004c 32
     ${base}=    Evaluate    0xffff0220 + (int($pub, 16) & 1) * 224
     FOR    ${i}    IN RANGE    3
@@ -352,7 +370,7 @@ A New Servod Waits For The Servo To Go Offline, Then Resumes
     Wait For Servod Log    parameter set loaded
     Param Should Be    pos_kp    61.5
     ${r}=    Exchange Window    1
-    Should Be True    ${r}[linux.exchanges] > 800
+    Exchange Should Run    ${r}
     ${st}=    Ampctl    status
     Log    ${st}    console=True
 
