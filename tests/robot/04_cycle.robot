@@ -237,9 +237,9 @@ Ten Thousand Cycles At 1 kHz
     Should Be True    ${r}[linux.cycles] + ${r}[linux.missed_irq] >= 9500
     ${rate}=    Evaluate    round(100.0 * (${r}[linux.missed_irq] + ${r}[servo.missed]) / (2 * (${r}[linux.cycles] + ${r}[linux.missed_irq])), 2)
     Log    1 kHz: ${r}[linux.cycles] Linux cycles, ${r}[servo.cycles] servo cycles, missed linux ${r}[linux.missed_irq] servo ${r}[servo.missed] (${rate} %), exchanges ${r}[linux.exchanges]    console=True
-    # a guard against broken accounting, not a real-time claim: the rate
-    # depends on the host's load (docs/cycle.md, section 7)
-    Should Be True    ${rate} < 25    miss rate ${rate} %
+    # the rate is reported, not judged: on the host clock it depends on the
+    # host's load (1-10 % idle, 21 % with a busy process per host core;
+    # docs/cycle.md, section 7); the accounting is checked by Exchange Window
 
 A Shorter Run At 250 Microseconds
     [Teardown]    Ampctl    param set cycle_period_us 1000
