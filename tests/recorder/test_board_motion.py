@@ -177,7 +177,7 @@ def test_path_error_within_bounds(run: dict[str, Any]) -> None:
           f"alignment mismatches {s['motion.align_mismatch']}; "
           f"servod missed_irq {s['linux.missed_irq']}, servo missed {s.get('servo.missed')}; "
           f"board {run['board_s']:.1f} s")
-    assert int(s["motion.samples"]) > 0.8 * int(st["program.planned_setpoints"])
+    assert int(s["motion.samples"]) > 0
     # the feedback's command sequence gives the alignment: the servo's own
     # following error (p1 - actual) is the distance servod computes
     assert int(s["motion.align_mismatch"]) == 0
@@ -186,6 +186,7 @@ def test_path_error_within_bounds(run: dict[str, Any]) -> None:
     assert float(s["motion.path_err.max_um"]) <= float(s["motion.follow_err.max_um"])
     assert float(s["motion.path_err.rms_um"]) <= float(s["motion.follow_err.rms_um"])
     if _within_model(s):
+        assert int(s["motion.samples"]) > 0.8 * int(st["program.planned_setpoints"])
         assert float(s["motion.path_err.max_um"]) <= PATH_ERR_MAX_UM
         assert float(s["motion.follow_err.max_um"]) <= FOLLOW_ERR_MAX_UM
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import os
 import signal
 import subprocess
@@ -142,10 +143,13 @@ def test_every_cycle_on_record(run: dict[str, Any]) -> None:
 def test_recovery_is_a_marked_gap(run: dict[str, Any]) -> None:
     res: RecordResult = run["res"]
     a, b = run["stats_before"], run["stats_after"]
-    assert int(b["linux.stalls"]) - int(a["linux.stalls"]) == 1
-    assert int(b["linux.recoveries"]) - int(a["linux.recoveries"]) == 1
+    # the hang's stall, plus any genuine one a loaded host causes (the
+    # guest starved for wd_limit cycles): each recovered, each on record
+    stalls = int(b["linux.stalls"]) - int(a["linux.stalls"])
+    assert stalls >= 1
+    assert int(b["linux.recoveries"]) - int(a["linux.recoveries"]) == stalls
     rec = [g for g in res.gaps if g["reason"] == "recovery"]
-    assert len(rec) == 1, res.gaps
+    assert len(rec) == stalls, res.gaps
     g = rec[0]
     assert g["source"] == "controller" and g["lost"] == 0
     assert res.first_cycle < g["from_cycle"] < g["to_cycle"] < res.last_cycle
@@ -158,7 +162,7 @@ def test_recovery_is_a_marked_gap(run: dict[str, Any]) -> None:
     # recovery's, plus a re-attach servod did not cause (seen once in five
     # runs on a loaded host: a controller_restart right after the recovery)
     restarts = [x for x in res.gaps if x["reason"] == "controller_restart"]
-    assert int(b["servo.attach_count"]) - int(a["servo.attach_count"]) == 1 + len(restarts), res.gaps
+    assert int(b["servo.attach_count"]) - int(a["servo.attach_count"]) == len(rec) + len(restarts), res.gaps
 
 
 def test_parameter_changes_recorded(run: dict[str, Any]) -> None:
@@ -168,7 +172,7 @@ def test_parameter_changes_recorded(run: dict[str, Any]) -> None:
     kp = [m for _t, m in params if m["name"] == "pos_kp"]
     # the ampctl change, then the whole set loaded at each re-attach (the
     # recovery's, and any controller_restart on record)
-    attaches = 1 + len([x for x in res.gaps if x["reason"] == "controller_restart"])
+    attaches = len([x for x in res.gaps if x["reason"] in ("recovery", "controller_restart")])
     assert [m["value"] for m in kp] == [70.0] * (1 + attaches), kp
     assert (kp[0]["id"], kp[0]["type"], kp[0]["unit"]) == (3, "f32", "1/s")
     assert res.first_cycle <= kp[0]["cycle"] <= res.last_cycle
@@ -189,7 +193,8 @@ def test_firmware_log_as_foxglove_log(run: dict[str, Any]) -> None:
     assert sum(1 for x in fw if x.startswith("stats cycle=")) >= 3  # once per 1000 cycles
     # the restarted firmware's banner, once (no line sent twice)
     assert sum(1 for x in fw if x.startswith("servoamp rpu_app ")) == 1, fw
-    assert any("attach_count 2" in x for x in fw)
+    # a re-attach (2, or more when a loaded host added a recovery of its own)
+    assert any(re.search(r"attach_count ([2-9]|\d\d)", x) for x in fw), fw
     # within one firmware run no line twice (two runs may print the same stats line)
     k = next(i for i, x in enumerate(fw) if x.startswith("servoamp rpu_app "))
     for part in (fw[:k], fw[k:]):
@@ -241,14 +246,16 @@ def test_axes_follow_the_sines(run: dict[str, Any]) -> None:
     follows its commanded sine: following error small against the 2000 inc
     amplitude, actual position tracking the command."""
     res: RecordResult = run["res"]
-    g = next(x for x in res.gaps if x["reason"] == "recovery")
+    gaps = [x for x in res.gaps if x["reason"] in ("recovery", "controller_restart")]
+    assert gaps
     cyc = {m["cycle"]: m for _t, m in _cycles(run["path"])}
     for i in range(run["hello"].n_axes):
         cmd, act, fe = [], [], []
         for _t, m in ((t, m) for _tp, t, m in mcapio.iter_json(run["path"],
                                                                [mcapio.axis_topic(i)])):
             c = m["cycle"]
-            if g["from_cycle"] - 5 <= c <= g["to_cycle"] + 300 or cyc[c]["servo_status"] != RUNNING:
+            if any(g["from_cycle"] - 5 <= c <= g["to_cycle"] + 300 for g in gaps) or \
+                    cyc[c]["servo_status"] != RUNNING:
                 continue
             cmd.append(m["command"]["target_pos"])
             act.append(m["feedback"]["actual_pos"])
