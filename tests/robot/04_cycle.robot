@@ -172,9 +172,11 @@ One Interrupt Per Cycle On Each Core
     ${miss}=    Delta    ${a}    ${b}    linux.missed_irq
     ${scyc}=    Delta    ${a}    ${b}    servo.cycles
     ${smiss}=    Delta    ${a}    ${b}    servo.missed
-    Log    ${ms} ms: linux irq ${n1} (+${miss} missed), servod wakes ${wakes}, servo cycles ${scyc} (+${smiss} missed)    console=True
-    # every interrupt the kernel took woke servod once
-    Should Be True    abs(${n1} - ${wakes}) <= 30
+    ${skips}=    Delta    ${a}    ${b}    linux.uio_skips
+    Log    ${ms} ms: linux irq ${n1} (+${miss} missed), servod wakes ${wakes} (+${skips} UIO events in the same wake-up), servo cycles ${scyc} (+${smiss} missed)    console=True
+    # every interrupt the kernel took woke servod, or was counted by the
+    # next wake-up when a loaded host delayed servod past a second one
+    Should Be True    abs(${n1} - ${wakes} - ${skips}) <= 30
     # one interrupt per 1 ms cycle on each core, handled or counted missed
     # (uptime has 10 ms resolution; the servo's counters are a few ms older)
     Should Be True    abs(${n1} + ${miss} - ${ms}) <= 0.05 * ${ms} + 20
