@@ -276,7 +276,7 @@ _QEMU_DIR: Path | None = None
 def project_qemu() -> Path:
     """The project's own QEMU (emulator/qemu/build.sh: Debian's source with
     our patches, cached by its inputs; built on first use), as the folder
-    that holds ``bin/``. ``build/qemu`` links to it."""
+    that holds ``bin/``; looked up once per process."""
     global _QEMU_DIR
     if _QEMU_DIR is None:
         res = subprocess.run([str(REPO / "emulator/qemu/build.sh"), "--print"], text=True,

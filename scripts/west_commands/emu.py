@@ -102,12 +102,11 @@ def run(args: argparse.Namespace) -> int:
         if host_port is not None:
             print(f"[emu] in the guest, bring eth0 up with: servoamp-net {board.data['network']['guest_addr']}")
         return qemu.interactive(board, images, accel=args.accel, extra_args=extra, clock=clock, icount=args.icount)
-    return scripted(board, images, commands, args, extra, net=host_port is not None)
+    return scripted(board, images, commands, args, extra, clock, net=host_port is not None)
 
 
 def scripted(board: qemu.Board, images: qemu.Images, commands: list[str], args: argparse.Namespace,
-             extra: list[str], net: bool = False) -> int:
-    clock = "virtual" if (args.virtual_time or args.icount) else None
+             extra: list[str], clock: str | None, net: bool = False) -> int:
     machine = qemu.QemuMachine(board, images, accel=args.accel, keep_logs=args.keep_logs, extra_args=extra,
                                clock=clock, icount=args.icount)
     failed = 0
