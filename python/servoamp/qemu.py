@@ -108,7 +108,7 @@ class Images:
     dtb: Path
     initramfs: Path
     firmware: tuple[Path, ...] = ()
-    stub_icount: Path | None = None   # park loop without wfe, for -icount (stub.S)
+    stub_icount: Path | None = None   # park loop in wfi + private timer, for -icount (stub.S)
 
 
 def _run(cmd: Sequence[str | Path], **kw: Any) -> subprocess.CompletedProcess[str]:
@@ -139,7 +139,8 @@ def kernel_source(kdir: Path) -> Path:
 def build_stub(board: Board, park_wfe: bool = True) -> Path:
     """Assemble the boot stub with the board's addresses: ``stub.bin``
     (CPU1 parks in wfe, for the host clock) or, with ``park_wfe=False``,
-    ``stub-icount.bin`` (CPU1 polls, for virtual time; see stub.S)."""
+    ``stub-icount.bin`` (CPU1 waits in wfi, woken by its private timer, for
+    virtual time; see stub.S)."""
     out = board.build_dir
     park = board.addr("load", "park_loop") - board.addr("load", "boot_stub")
     name = "stub" if park_wfe else "stub-icount"
@@ -307,14 +308,14 @@ CLOCKS = ("virtual", "host")
 
 
 def default_clock() -> str:
-    """``host`` (guest time follows the host clock, the default) or
-    ``virtual`` ($SERVOAMP_CLOCK=virtual: instruction-counted guest time).
+    """``virtual`` (the default: instruction-counted guest time, -icount) or
+    ``host`` ($SERVOAMP_CLOCK=host: guest time follows the host clock).
 
-    Virtual time runs the cycle with zero missed cycles whatever the host
-    load, but is not the default yet: while CPU1 spins (a parked CPU1, or a
-    firmware that busy-polls) Linux on CPU0 can slow to a crawl, which
-    stalls remoteproc stop/start sequences (docs/cycle.md, section 6)."""
-    clock = os.environ.get("SERVOAMP_CLOCK", "host")
+    Under virtual time host load cannot make the guest miss a cycle: it only
+    changes how long a guest second takes on the host (docs/cycle.md,
+    section 6). The host clock stays for interactive use, where the guest
+    should keep pace with a person."""
+    clock = os.environ.get("SERVOAMP_CLOCK", "virtual")
     if clock not in CLOCKS:
         raise QemuError(f"SERVOAMP_CLOCK={clock!r}: expected one of {', '.join(CLOCKS)}")
     return clock

@@ -46,9 +46,10 @@ DESCRIPTION = "build what is missing and boot the emulated board (QEMU)"
 def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("-b", "--board", default="zynq7000_qemu", help="board folder under boards/ (default: %(default)s)")
     parser.add_argument("--accel", default=None, help="QEMU -accel value, e.g. 'tcg,thread=single' (default: QEMU's, multi-threaded TCG)")
-    parser.add_argument("--virtual-time", action="store_true",
-                        help="guest time counts instructions (-icount, board.yaml qemu.clock) instead of "
-                             "following the host clock: no cycle lost to host load (docs/cycle.md)")
+    parser.add_argument("--host-time", action="store_true",
+                        help="guest time follows the host clock (for interactive use) instead of counting "
+                             "instructions (-icount, board.yaml qemu.clock, the default): on the host clock "
+                             "host load can make the guest miss cycles (docs/cycle.md)")
     parser.add_argument("--icount", default=None, metavar="SPEC",
                         help="virtual time with this -icount value instead of the board's "
                              "(one instruction = 2^shift ns)")
@@ -96,7 +97,10 @@ def run(args: argparse.Namespace) -> int:
         commands += [ln for ln in args.script.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     nic, host_port = net_args(board, args.net)
     extra = nic
-    clock = "virtual" if (args.virtual_time or args.icount) else None
+    if args.host_time and args.icount:
+        print("[emu] --host-time and --icount exclude each other", file=sys.stderr)
+        return 2
+    clock = "host" if args.host_time else ("virtual" if args.icount else None)
     print(f"[emu] clock: {' '.join(qemu.clock_args(board, clock, args.icount)) or 'host'}")
     if not commands:
         if host_port is not None:

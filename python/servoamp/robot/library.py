@@ -17,6 +17,7 @@ from servoamp.qemu import (
     QemuMachine,
     Uart,
     boot_to_shell,
+    default_clock,
     prepare_images,
     run_shell,
 )
@@ -74,6 +75,13 @@ class EmulatedBoard:
         """QEMU ``-accel`` value for the next Start Emulation, e.g.
         ``tcg,thread=single`` (empty: QEMU's default, multi-threaded TCG)."""
         self._accel = accel or None
+
+    @keyword
+    def emulation_clock(self) -> str:
+        """``virtual`` (-icount: guest time counts instructions) or ``host``
+        (guest time follows the host clock): $SERVOAMP_CLOCK, default
+        virtual (docs/cycle.md, section 6)."""
+        return default_clock()
 
     @keyword
     def start_emulation(self) -> None:
