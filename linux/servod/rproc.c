@@ -1,7 +1,6 @@
 // SPDX-License-Identifier: MIT
 /* rproc.c - the servo core's remoteproc instance in sysfs (rproc.h). */
 #define _GNU_SOURCE
-#include <dirent.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -10,25 +9,7 @@
 
 int rproc_lookup(char *entry, size_t n)
 {
-	DIR *d = opendir("/sys/class/remoteproc");
-	struct dirent *e;
-	char path[600], buf[64];
-	int rc = -1;
-
-	if (!d)
-		return -1;
-	while ((e = readdir(d))) {
-		if (strncmp(e->d_name, "remoteproc", 10))
-			continue;
-		snprintf(path, sizeof(path), "/sys/class/remoteproc/%s/name", e->d_name);
-		if (!sysfs_read(path, buf, sizeof(buf)) && !strcmp(buf, RPROC_NAME)) {
-			snprintf(entry, n, "%s", e->d_name);
-			rc = 0;
-			break;
-		}
-	}
-	closedir(d);
-	return rc;
+	return sysfs_class_find("remoteproc", "remoteproc", RPROC_NAME, 1, entry, n);
 }
 
 int rproc_find(struct rproc *rp)
