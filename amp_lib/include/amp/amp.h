@@ -131,7 +131,7 @@ int amp_linux_peer_info(const void *base, uint32_t size, struct amp_peer_info *p
 int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit);
 
 /*
- * One periodic cycle, seed 000's Linux steps: heartbeat, check the
+ * One periodic cycle, the periodic exchange's Linux steps: heartbeat, check the
  * semaphore, read the feedback (into l->fb, described by rx), write the
  * commands (n_axes <= AMP_MAX_AXES), set the semaphore. Returns AMP_OK,
  * AMP_E_INVAL, AMP_E_PEER_ABSENT (servo not attached, commands still
@@ -150,7 +150,7 @@ struct amp_msg {
 };
 
 /*
- * Non-periodic request/response (seed 000's 7 Linux steps), polling with
+ * Non-periodic request/response (the mailbox's 7 Linux steps), polling with
  * a timeout in port ticks. On AMP_OK, resp holds the validated answer
  * (resp->status is the servo's status). AMP_E_BUSY: the servo still owns
  * an earlier request (it timed out) and has not answered it yet.
