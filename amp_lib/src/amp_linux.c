@@ -78,6 +78,35 @@ int amp_linux_peer(const struct amp_linux *l)
 	return AMP_E_PEER_ABSENT;
 }
 
+int amp_linux_peer_info(const void *base, uint32_t size, struct amp_peer_info *pi)
+{
+	const struct amp_ocm *o = base;
+	const struct amp_servo_line *sl;
+
+	if (!o || !pi || ((uintptr_t)base % AMP_CACHE_LINE) != 0 || size < sizeof(*o))
+		return AMP_E_INVAL;
+	sl = &o->servo_line;
+	AMP_PORT_CACHE_INVAL(sl, sizeof(*sl));
+	pi->epoch = RD_ACQ(&sl->epoch);
+	pi->state = RD_ACQ(&sl->state);
+	pi->fault = RD_ACQ(&sl->fault);
+	pi->attach_count = RD_ACQ(&sl->attach_count);
+	pi->heartbeat = RD_ACQ(&sl->heartbeat);
+	return AMP_OK;
+}
+
+int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit)
+{
+	if (!l)
+		return AMP_E_INVAL;
+	if (wd_limit == 0)
+		wd_limit = AMP_WD_LIMIT_DEFAULT;
+	if (wd_limit > AMP_WD_LIMIT_MAX)
+		return AMP_E_INVAL;
+	l->wd.limit = wd_limit;
+	return AMP_OK;
+}
+
 static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx)
 {
 	struct amp_ocm *o = l->ocm;
@@ -229,6 +258,15 @@ int amp_linux_mbox_poll(struct amp_linux *l, struct amp_msg *resp)
 	return AMP_OK;
 }
 
+int amp_linux_mbox_cancel(struct amp_linux *l)
+{
+	if (!l || !l->mbox_pending)
+		return AMP_E_INVAL;
+	l->mbox_pending = 0;
+	l->st.mbox_err++;
+	return AMP_OK;
+}
+
 int amp_linux_mbox_call(struct amp_linux *l, const struct amp_msg *req,
 			struct amp_msg *resp, amp_ticks_t timeout)
 {
@@ -246,8 +284,7 @@ int amp_linux_mbox_call(struct amp_linux *l, const struct amp_msg *req,
 		return rc;
 	while ((rc = amp_linux_mbox_poll(l, resp)) == AMP_E_BUSY) {
 		if ((amp_ticks_t)(amp_port_ticks() - t0) >= timeout) {
-			l->mbox_pending = 0;
-			l->st.mbox_err++;
+			(void)amp_linux_mbox_cancel(l);
 			return AMP_E_TIMEOUT;
 		}
 		AMP_PORT_RELAX();

@@ -531,6 +531,110 @@ static void test_mailbox(void)
 	CHECK_EQ(amp_linux_mbox_poll(&L, &resp), AMP_E_PEER_ABSENT);
 }
 
+static void test_peer_info(void)
+{
+	struct amp_peer_info pi;
+	struct amp_rx_info rx;
+
+	/* arguments */
+	CHECK_EQ(amp_linux_peer_info(NULL, sizeof(ocm_buf), &pi), AMP_E_INVAL);
+	CHECK_EQ(amp_linux_peer_info(ocm_buf, sizeof(ocm_buf), NULL), AMP_E_INVAL);
+	CHECK_EQ(amp_linux_peer_info(ocm_buf + 4, sizeof(ocm_buf) - 4, &pi), AMP_E_INVAL);
+	CHECK_EQ(amp_linux_peer_info(ocm_buf, AMP_OCM_SIZE - 1, &pi), AMP_E_INVAL);
+
+	/* a region nobody initialised: the words as they are */
+	memset(ocm_buf, 0, sizeof(ocm_buf));
+	OCM->servo_line.state = AMP_SSTATE_FAULT;
+	OCM->servo_line.fault = 0x1234u;
+	OCM->servo_line.epoch = 9;
+	OCM->servo_line.attach_count = 4;
+	OCM->servo_line.heartbeat = 77;
+	CHECK_EQ(amp_linux_peer_info(ocm_buf, AMP_OCM_SIZE, &pi), AMP_OK);
+	CHECK_EQ(pi.state, AMP_SSTATE_FAULT);
+	CHECK_EQ(pi.fault, 0x1234u);
+	CHECK_EQ(pi.epoch, 9);
+	CHECK_EQ(pi.attach_count, 4);
+	CHECK_EQ(pi.heartbeat, 77);
+
+	/* a live link: what the servo published */
+	fresh_pair(0);
+	CHECK_EQ(amp_linux_peer_info(ocm_buf, sizeof(ocm_buf), &pi), AMP_OK);
+	CHECK_EQ(pi.state, AMP_SSTATE_RUNNING);
+	CHECK_EQ(pi.fault, 0);
+	CHECK_EQ(pi.epoch, L.epoch);
+	CHECK_EQ(pi.attach_count, 1);
+	CHECK_EQ(amp_servo_cycle_rx(&S, 0, &rx), AMP_OK);
+	CHECK_EQ(amp_linux_peer_info(ocm_buf, sizeof(ocm_buf), &pi), AMP_OK);
+	CHECK_EQ(pi.heartbeat, S.heartbeat);
+	amp_servo_set_state(&S, AMP_SSTATE_SAFESTOP, 55);
+	CHECK_EQ(amp_linux_peer_info(ocm_buf, sizeof(ocm_buf), &pi), AMP_OK);
+	CHECK_EQ(pi.state, AMP_SSTATE_SAFESTOP);
+	CHECK_EQ(pi.fault, 55);
+	CHECK_EQ(amp_servo_attach(&S, ocm_buf, sizeof(ocm_buf)), AMP_OK);
+	CHECK_EQ(amp_linux_peer_info(ocm_buf, sizeof(ocm_buf), &pi), AMP_OK);
+	CHECK_EQ(pi.attach_count, 2);
+}
+
+static void test_wd_limit(void)
+{
+	struct amp_cmd_axis a[1];
+	struct amp_rx_info rx;
+	int rc = AMP_OK;
+
+	CHECK_EQ(amp_linux_set_wd_limit(NULL, 5), AMP_E_INVAL);
+	fresh_pair(100);
+	CHECK_EQ(amp_linux_set_wd_limit(&L, 1000001), AMP_E_INVAL);
+	CHECK_EQ(L.wd.limit, 100);
+	CHECK_EQ(amp_linux_set_wd_limit(&L, 0), AMP_OK);
+	CHECK_EQ(L.wd.limit, AMP_WD_LIMIT_DEFAULT);
+	CHECK_EQ(amp_linux_set_wd_limit(&L, 3), AMP_OK);
+	/* the servo's heartbeat stands still: stalled after the new limit */
+	fill_cmd(a, 1, 0);
+	for (int i = 0; i < 3 && rc == AMP_OK; i++)
+		rc = amp_linux_cycle(&L, a, 1, 0, &rx);
+	CHECK_EQ(rc, AMP_OK);
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_E_STALLED);
+}
+
+static void test_mbox_cancel(void)
+{
+	struct amp_mbox_req sr;
+	uint32_t in[4] = { 0 }, out = 0;
+	struct amp_msg req = { 5, 0, 4, 4, &out };
+	struct amp_msg resp = { 0, 0, 0, sizeof(in), in };
+
+	fresh_pair(0);
+	CHECK_EQ(amp_linux_mbox_cancel(NULL), AMP_E_INVAL);
+	CHECK_EQ(amp_linux_mbox_cancel(&L), AMP_E_INVAL);	/* nothing pending */
+	CHECK_EQ(L.st.mbox_err, 0);
+
+	/* the caller gives up: counted, nothing pending any more */
+	CHECK_EQ(amp_linux_mbox_post(&L, &req), AMP_OK);
+	CHECK_EQ(amp_linux_mbox_poll(&L, &resp), AMP_E_BUSY);
+	CHECK_EQ(amp_linux_mbox_cancel(&L), AMP_OK);
+	CHECK_EQ(L.st.mbox_err, 1);
+	CHECK_EQ(L.mbox_pending, 0);
+	CHECK_EQ(amp_linux_mbox_poll(&L, &resp), AMP_E_INVAL);
+	CHECK_EQ(amp_linux_mbox_cancel(&L), AMP_E_INVAL);
+	CHECK_EQ(L.st.mbox_err, 1);
+
+	/* the servo still holds the token: busy until it answers the old one */
+	CHECK_EQ(amp_linux_mbox_post(&L, &req), AMP_E_BUSY);
+	CHECK_EQ(amp_servo_mbox_poll(&S, &sr), 1);
+	CHECK_EQ(amp_servo_mbox_respond(&S, 0, NULL, 0), AMP_OK);
+
+	/* then the link works again, and the late answer is not taken */
+	CHECK_EQ(amp_linux_mbox_post(&L, &req), AMP_OK);
+	CHECK_EQ(amp_servo_mbox_poll(&S, &sr), 1);
+	CHECK_EQ(sr.command, 5);
+	CHECK_EQ(amp_servo_mbox_respond(&S, 2, &out, 4), AMP_OK);
+	CHECK_EQ(amp_linux_mbox_poll(&L, &resp), AMP_OK);
+	CHECK_EQ(resp.status, 2);
+	CHECK_EQ(resp.length, 4);
+	CHECK_EQ(L.st.mbox_ok, 1);
+	CHECK_EQ(L.st.mbox_err, 1);
+}
+
 static void test_layout_constants(void)
 {
 	/* the documented layout (docs/amp-protocol.md), default config */
@@ -558,6 +662,9 @@ int main(void)
 	test_periodic();
 	test_watchdogs_both_ways();
 	test_mailbox();
+	test_peer_info();
+	test_wd_limit();
+	test_mbox_cancel();
 	test_layout_constants();
 	return check_summary("amp_lib unit");
 }

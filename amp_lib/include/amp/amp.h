@@ -111,8 +111,27 @@ void amp_linux_close(struct amp_linux *l);
  */
 int amp_linux_peer(const struct amp_linux *l);
 
+/* The servo's own line in the region, as the Linux side reads it. */
+struct amp_peer_info {
+	uint32_t state;		/* AMP_SSTATE_* */
+	uint32_t fault;		/* the servo's fault word (AMP_E_* or application code) */
+	uint32_t epoch;		/* epoch the servo attached to */
+	uint32_t attach_count;	/* attaches in that epoch (restarts, recoveries) */
+	uint32_t heartbeat;	/* +1 every servo cycle */
+};
+
 /*
- * One periodic cycle, seed 000's Linux steps: heartbeat, check the
+ * Read the servo's line from the region at base (size bytes), whether or
+ * not amp_linux_init() ran on it: the words as they are, for status and
+ * supervision. AMP_OK, or AMP_E_INVAL (NULL, misaligned, region too small).
+ */
+int amp_linux_peer_info(const void *base, uint32_t size, struct amp_peer_info *pi);
+
+/* Change the heartbeat watchdog limit (cycles, 0 = default) of a link. */
+int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit);
+
+/*
+ * One periodic cycle, the periodic exchange's Linux steps: heartbeat, check the
  * semaphore, read the feedback (into l->fb, described by rx), write the
  * commands (n_axes <= AMP_MAX_AXES), set the semaphore. Returns AMP_OK,
  * AMP_E_INVAL, AMP_E_PEER_ABSENT (servo not attached, commands still
@@ -131,7 +150,7 @@ struct amp_msg {
 };
 
 /*
- * Non-periodic request/response (seed 000's 7 Linux steps), polling with
+ * Non-periodic request/response (the mailbox's 7 Linux steps), polling with
  * a timeout in port ticks. On AMP_OK, resp holds the validated answer
  * (resp->status is the servo's status). AMP_E_BUSY: the servo still owns
  * an earlier request (it timed out) and has not answered it yet.
@@ -143,6 +162,13 @@ int amp_linux_mbox_call(struct amp_linux *l, const struct amp_msg *req,
 int amp_linux_mbox_post(struct amp_linux *l, const struct amp_msg *req);
 /* AMP_OK when answered, AMP_E_BUSY while pending, other errors final. */
 int amp_linux_mbox_poll(struct amp_linux *l, struct amp_msg *resp);
+/*
+ * Give up on the request in flight (the caller's own timeout): counted as
+ * a mailbox error; the servo still owns the token until it answers, so the
+ * next post returns AMP_E_BUSY until then. AMP_OK, or AMP_E_INVAL if no
+ * request is pending.
+ */
+int amp_linux_mbox_cancel(struct amp_linux *l);
 
 /* ------------------------------------------------------------------ */
 /* Servo side                                                          */

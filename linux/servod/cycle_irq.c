@@ -1,0 +1,69 @@
+// SPDX-License-Identifier: MIT
+/* cycle_irq.c - the cycle interrupt through UIO (cycle_irq.h). */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <poll.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "context.h"
+
+#define TTC_CLK_CTRL1 0x04u	/* counter 1 clock control (prescaler) */
+#define TTC_CNT_VAL1  0x1cu	/* counter 1 value */
+#define TTC_ISR1      0x58u	/* counter 1 interrupt register, clear on read */
+
+static uint32_t ttc_rd(const struct cycle_irq *irq, uint32_t off)
+{
+	return *(volatile uint32_t *)(irq->ttc + off);
+}
+
+/* Counter 1's tick in ns, Q16 (its prescaler as the firmware set it). */
+static uint32_t ns_per_tick_q16(const struct cycle_irq *irq)
+{
+	uint32_t clk = ttc_rd(irq, TTC_CLK_CTRL1);
+	uint64_t div = (clk & 1u) ? 2ull << ((clk >> 1) & 0xfu) : 1u;
+
+	return (uint32_t)((div * 1000000000ull * 65536u) / irq->ttc_hz);
+}
+
+int cycle_irq_open(struct servod *sd, struct cycle_irq *irq, uint32_t ttc_hz)
+{
+	uint32_t size, offs;
+
+	irq->ttc_hz = ttc_hz;
+	irq->fd = uio_open(sd, "cycle-interrupt", &irq->ttc, &size, &offs);
+	if (irq->fd < 0)
+		return -1;
+	irq->ttc += offs;	/* the node's reg is counter 1's interrupt register */
+	irq->ttc -= TTC_ISR1;	/* ... registers addressed from the TTC base */
+	return 0;
+}
+
+/* Acknowledge our flag (clear on read) and re-enable the line. */
+static void ack_and_rearm(struct servod *sd, struct cycle_irq *irq)
+{
+	uint32_t one = 1;
+
+	(void)ttc_rd(irq, TTC_ISR1);
+	if (write(irq->fd, &one, 4) != 4)
+		log_rt(sd, "uio: re-enable failed: %s", strerror(errno));
+}
+
+int cycle_irq_wait(struct servod *sd, struct cycle_irq *irq, struct cycle_wake *w)
+{
+	struct pollfd pfd = { irq->fd, POLLIN, 0 };
+	uint32_t ticks;
+
+	if (poll(&pfd, 1, 100) <= 0) {
+		/* idempotent in uio_pdrv_genirq */
+		ack_and_rearm(sd, irq);
+		return -1;
+	}
+	if (read(irq->fd, &w->count, 4) != 4)
+		return -1;
+	w->t_ns = now_ns();
+	ticks = ttc_rd(irq, TTC_CNT_VAL1) & 0xffffu;
+	ack_and_rearm(sd, irq);
+	w->lat_ns = (uint32_t)(((uint64_t)ticks * ns_per_tick_q16(irq)) >> 16);
+	return 0;
+}

@@ -1,0 +1,358 @@
+// SPDX-License-Identifier: MIT
+/* params.c - the parameter set: text forms, the file, the servo, the
+ * "param" request (params.h). */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "context.h"
+
+const struct sp_param_desc param_desc[SP_P_COUNT] = SP_PARAM_TABLE_INIT;
+
+/* ---- text forms --------------------------------------------------------- */
+
+static int param_by_name(const char *s)
+{
+	char *end;
+	unsigned long id;
+
+	for (int i = 0; i < SP_P_COUNT; i++)
+		if (!strcmp(param_desc[i].name, s))
+			return i;
+	id = strtoul(s, &end, 0);
+	if (*s && !*end && id < SP_P_COUNT)
+		return (int)id;
+	return -1;
+}
+
+static float f_of(uint32_t w)
+{
+	float f;
+
+	memcpy(&f, &w, 4);
+	return f;
+}
+
+static uint32_t w_of(float f)
+{
+	uint32_t w;
+
+	memcpy(&w, &f, 4);
+	return w;
+}
+
+static double param_double(const struct sp_param_desc *d, uint32_t w)
+{
+	switch (d->type) {
+	case SP_T_F32: return (double)f_of(w);
+	case SP_T_I32: return (double)(int32_t)w;
+	default: return (double)w;
+	}
+}
+
+static void fmt_value(const struct sp_param_desc *d, uint32_t w, char *buf, size_t n)
+{
+	switch (d->type) {
+	case SP_T_F32: snprintf(buf, n, "%.9g", (double)f_of(w)); break;
+	case SP_T_I32: snprintf(buf, n, "%d", (int32_t)w); break;
+	default: snprintf(buf, n, "%u", w); break;
+	}
+}
+
+static void fmt_num(const struct sp_param_desc *d, double v, char *buf, size_t n)
+{
+	if (d->type == SP_T_F32)
+		snprintf(buf, n, "%.9g", (double)(float)v);
+	else
+		snprintf(buf, n, "%.0f", v);
+}
+
+/* Parse and range-check a value: SE_OK and *w, or SE_VALUE with a message. */
+static int parse_value(const struct servod *sd, const struct sp_param_desc *d, const char *s, uint32_t *w,
+		       char *msg, size_t n)
+{
+	char *end, lo[32], hi[32];
+	int ok = 1;
+
+	fmt_num(d, d->min, lo, sizeof(lo));
+	fmt_num(d, d->max, hi, sizeof(hi));
+	errno = 0;
+	if (d->type == SP_T_F32) {
+		float f = strtof(s, &end);
+
+		if (!*s || *end || errno || isnan(f))
+			ok = -1;
+		else if (f < (float)d->min || f > (float)d->max)
+			ok = 0;
+		*w = w_of(f);
+	} else {
+		long long v = strtoll(s, &end, 0);
+
+		if (!*s || *end || errno)
+			ok = -1;
+		else if (v < (long long)d->min || v > (long long)d->max)
+			ok = 0;
+		*w = d->type == SP_T_I32 ? (uint32_t)(int32_t)v : (uint32_t)v;
+	}
+	if (ok < 0) {
+		snprintf(msg, n, "%s: '%s' is not a%s %s", d->name, s,
+			 d->type == SP_T_F32 ? "" : "n", d->type == SP_T_F32 ? "number" : "integer");
+		return SE_VALUE;
+	}
+	if (!ok) {
+		snprintf(msg, n, "%s: %s out of range [%s, %s]%s%s", d->name, s, lo, hi,
+			 *d->unit ? " " : "", d->unit);
+		return SE_VALUE;
+	}
+	if ((d->flags & SP_F_RO) && *w != sd->pset[d->id]) {
+		snprintf(msg, n, "%s is read-only", d->name);
+		return SE_VALUE;
+	}
+	return SE_OK;
+}
+
+/* ---- the file --------------------------------------------------------------- */
+
+static void params_defaults(struct servod *sd)
+{
+	for (int i = 0; i < SP_P_COUNT; i++) {
+		const struct sp_param_desc *d = &param_desc[i];
+
+		sd->pset[i] = d->type == SP_T_F32 ? w_of((float)d->def) :
+			      d->type == SP_T_I32 ? (uint32_t)(int32_t)d->def : (uint32_t)d->def;
+	}
+}
+
+void params_load(struct servod *sd)
+{
+	const char *path = sd->opt.param_path;
+	FILE *f = fopen(path, "r");
+	char line[256], name[64], val[64], msg[160];
+	int n = 0;
+
+	params_defaults(sd);
+	if (!f) {
+		logm(sd, "no parameter file %s: defaults", path);
+		return;
+	}
+	while (fgets(line, sizeof(line), f)) {
+		int id;
+		uint32_t w;
+
+		if (line[0] == '#' || sscanf(line, "%63s %63s", name, val) != 2)
+			continue;
+		id = param_by_name(name);
+		if (id < 0) {
+			logm(sd, "%s: unknown parameter '%s' ignored", path, name);
+			continue;
+		}
+		if (parse_value(sd, &param_desc[id], val, &w, msg, sizeof(msg)) != SE_OK) {
+			logm(sd, "%s: %s (default kept)", path, msg);
+			continue;
+		}
+		sd->pset[id] = w;
+		n++;
+	}
+	fclose(f);
+	logm(sd, "loaded %d parameter(s) from %s", n, path);
+}
+
+/* write temp + fsync + rename + fsync(dir) */
+static int params_save(const struct servod *sd)
+{
+	const char *path = sd->opt.param_path;
+	char tmp[300], dir[300], v[48];
+	FILE *f;
+	int fd;
+	char *slash;
+
+	snprintf(dir, sizeof(dir), "%s", path);
+	slash = strrchr(dir, '/');
+	if (slash && slash != dir) {
+		*slash = 0;
+		mkdir(dir, 0755);
+	} else {
+		snprintf(dir, sizeof(dir), ".");
+	}
+	snprintf(tmp, sizeof(tmp), "%s.tmp", path);
+	f = fopen(tmp, "w");
+	if (!f)
+		return -1;
+	fprintf(f, "# servod parameter set (servoamp/servo_proto.h); loaded into the servo at every attach\n");
+	for (int i = 0; i < SP_P_COUNT; i++) {
+		if (!(param_desc[i].flags & SP_F_RESTORE))
+			continue;
+		fmt_value(&param_desc[i], sd->pset[i], v, sizeof(v));
+		fprintf(f, "%s %s\n", param_desc[i].name, v);
+	}
+	if (fflush(f) || fsync(fileno(f))) {
+		fclose(f);
+		return -1;
+	}
+	fclose(f);
+	if (rename(tmp, path))
+		return -1;
+	fd = open(dir, O_RDONLY | O_DIRECTORY);
+	if (fd >= 0) {
+		fsync(fd);
+		close(fd);
+	}
+	return 0;
+}
+
+/* ---- the servo -------------------------------------------------------------- */
+
+int params_restore(struct servod *sd, char *msg, size_t n)
+{
+	uint32_t req[1 + 2 * SP_P_COUNT], resp[4], cnt = 0, len;
+	int32_t status;
+	int rc;
+
+	for (int i = 0; i < SP_P_COUNT; i++) {
+		if (!(param_desc[i].flags & SP_F_RESTORE))
+			continue;
+		req[1 + 2 * cnt] = (uint32_t)i;
+		req[2 + 2 * cnt] = sd->pset[i];
+		cnt++;
+	}
+	req[0] = cnt;
+	rc = mbox_request(sd, SP_CMD_PARAM_SET_MANY, req, 4u * (1u + 2u * cnt), resp, sizeof(resp), &len, &status,
+			  msg, n);
+	if (rc == SE_OK && status) {
+		snprintf(msg, n, "servo refused the parameter set: %s", sp_strerror(status));
+		rc = SE_SERVO;
+	}
+	return rc;
+}
+
+/* What servod itself follows of a new value: the period, the watchdog, the axes. */
+static void apply_local(struct servod *sd, uint32_t id, uint32_t w)
+{
+	pthread_mutex_lock(&sd->lock);
+	if (id == SP_P_cycle_period_us)
+		sd->period_ns = w * 1000u;
+	else if (id == SP_P_wd_limit)
+		(void)amp_linux_set_wd_limit(&sd->amp, w);
+	else if (id == SP_P_axes)
+		sd->axes = w;
+	pthread_mutex_unlock(&sd->lock);
+}
+
+void params_publish(struct servod *sd, uint32_t id, uint32_t w)
+{
+	const struct sp_param_desc *d = &param_desc[id];
+
+	if (sd->telem_on)
+		telem_push_param(&sd->telem, 0, id, d->name, d->type, param_double(d, w), d->unit);
+}
+
+/* ---- "param list | param get NAME | param set NAME VALUE" ----------------- */
+
+static void param_list(const struct servod *sd, struct out *o)
+{
+	char v[48], lo[32], hi[32], df[32];
+
+	put(o, "%-3s %-16s %-4s %-10s %-12s %-12s %-12s %s\n", "id", "name", "type", "unit", "min", "max",
+	    "default", "value");
+	for (int i = 0; i < SP_P_COUNT; i++) {
+		const struct sp_param_desc *d = &param_desc[i];
+
+		fmt_value(d, sd->pset[i], v, sizeof(v));
+		fmt_num(d, d->min, lo, sizeof(lo));
+		fmt_num(d, d->max, hi, sizeof(hi));
+		fmt_num(d, d->def, df, sizeof(df));
+		put(o, "%-3u %-16s %-4s %-10s %-12s %-12s %-12s %s%s\n", d->id, d->name,
+		    d->type == SP_T_F32 ? "f32" : d->type == SP_T_I32 ? "i32" : "u32",
+		    *d->unit ? d->unit : "-", lo, hi, df, v, (d->flags & SP_F_RO) ? " (ro)" : "");
+	}
+}
+
+static void put_value(struct out *o, const struct sp_param_desc *d, uint32_t w)
+{
+	char v[48];
+
+	fmt_value(d, w, v, sizeof(v));
+	put(o, "%s=%s%s%s\n", d->name, v, *d->unit ? " " : "", d->unit);
+}
+
+static int param_get(struct servod *sd, struct out *o, int id, char *msg, size_t n)
+{
+	uint32_t req[1] = { (uint32_t)id }, resp[2], len;
+	int32_t status;
+	int rc = mbox_request(sd, SP_CMD_PARAM_GET, req, 4, resp, sizeof(resp), &len, &status, msg, n);
+
+	if (rc)
+		return rc;
+	if (status || len != 8 || resp[0] != (uint32_t)id) {
+		snprintf(msg, n, "%s: %s", param_desc[id].name, sp_strerror(status));
+		return SE_SERVO;
+	}
+	put_value(o, &param_desc[id], resp[1]);
+	return SE_OK;
+}
+
+static int param_set(struct servod *sd, struct out *o, int id, const char *value, char *msg, size_t n)
+{
+	const struct sp_param_desc *d = &param_desc[id];
+	uint32_t req[2], resp[2], len, w;
+	int32_t status;
+	int rc = parse_value(sd, d, value, &w, msg, n);
+
+	if (rc)
+		return rc;
+	req[0] = (uint32_t)id;
+	req[1] = w;
+	rc = mbox_request(sd, SP_CMD_PARAM_SET, req, 8, resp, sizeof(resp), &len, &status, msg, n);
+	if (rc)
+		return rc;
+	if (status) {
+		snprintf(msg, n, "%s: %s", d->name, sp_strerror(status));
+		return status == SP_E_RANGE || status == SP_E_READONLY ? SE_VALUE : SE_SERVO;
+	}
+	if (d->flags & SP_F_RESTORE) {
+		uint32_t old = sd->pset[id];
+
+		sd->pset[id] = resp[1];
+		if (params_save(sd)) {
+			sd->pset[id] = old;
+			snprintf(msg, n, "cannot store %s: %s (the servo has the new value)", sd->opt.param_path,
+				 strerror(errno));
+			return SE_IO;
+		}
+	}
+	apply_local(sd, (uint32_t)id, resp[1]);
+	params_publish(sd, (uint32_t)id, resp[1]);
+	put_value(o, d, resp[1]);
+	return SE_OK;
+}
+
+static int req_param(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
+{
+	int id;
+
+	argc--, argv++;
+	if (argc >= 1 && !strcmp(argv[0], "list")) {
+		param_list(sd, o);
+		return SE_OK;
+	}
+	if (argc < 2 || (strcmp(argv[0], "get") && strcmp(argv[0], "set")) ||
+	    (!strcmp(argv[0], "set") && argc != 3) || (!strcmp(argv[0], "get") && argc != 2)) {
+		snprintf(msg, n, "usage: param list | param get NAME | param set NAME VALUE");
+		return SE_USAGE;
+	}
+	id = param_by_name(argv[1]);
+	if (id < 0) {
+		snprintf(msg, n, "unknown parameter '%s' (see: ampctl param list)", argv[1]);
+		return SE_UNKNOWN;
+	}
+	if (!strcmp(argv[0], "get"))
+		return param_get(sd, o, id, msg, n);
+	return param_set(sd, o, id, argv[2], msg, n);
+}
+SERVOD_REQUEST("param", req_param);

@@ -1,0 +1,31 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * rproc.h - the servo core's remoteproc instance in sysfs (the one named
+ * "servo-cpu1"): its state, the driver's report_crash attribute
+ * (docs/ABI/sysfs-servoamp-remoteproc) and the firmware's trace buffer in
+ * debugfs.
+ */
+#ifndef SERVOD_RPROC_H
+#define SERVOD_RPROC_H
+
+#include <stddef.h>
+
+#define RPROC_NAME "servo-cpu1"
+
+struct rproc {
+	char dir[300];		/* /sys/class/remoteproc/remoteprocN, "" until found */
+	char state[32];		/* the last state read (rproc_state()) */
+};
+
+/* The one lookup: the entry ("remoteprocN") whose name is RPROC_NAME. 0 or -1. */
+int rproc_lookup(char *entry, size_t n);
+/* rp->dir from the lookup: 0, or -1 (not there yet). */
+int rproc_find(struct rproc *rp);
+/* "offline", "running", "crashed", ... or "absent" (looked up again next time). */
+const char *rproc_state(struct rproc *rp);
+/* Writes "watchdog" to the driver's report_crash (its path in path): 0 or -1 (errno). */
+int rproc_report_crash(const struct rproc *rp, char *path, size_t n);
+/* The firmware's trace buffer (debugfs trace0): 0, or -1 (no instance yet). */
+int rproc_trace_path(char *path, size_t n);
+
+#endif

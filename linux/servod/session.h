@@ -1,0 +1,65 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * session.h - the session state machine: what servod knows of the link
+ * with the servo (docs/cycle.md, "The session").
+ *
+ *   CLOSED      no region of ours: amp_linux_init() waits until remoteproc
+ *               says the servo is offline (start, or after a stop)
+ *   OPEN        region initialised (a new epoch), the servo not yet seen
+ *               running by remoteproc
+ *   RUNNING     remoteproc has said "running" in this session
+ *   RECOVERING  servod reported a stall to remoteproc; the firmware is
+ *               being restarted and re-attaches in the same epoch
+ *
+ * The cycle thread exchanges while the session is not CLOSED.
+ */
+#ifndef SERVOD_SESSION_H
+#define SERVOD_SESSION_H
+
+#include <stdatomic.h>
+#include <stdint.h>
+#include <time.h>
+
+enum session_state {
+	SESSION_CLOSED,
+	SESSION_OPEN,
+	SESSION_RUNNING,
+	SESSION_RECOVERING,
+};
+
+enum session_event {
+	SEV_REGION_READY,	/* amp_linux_init() done (remoteproc: offline) */
+	SEV_SEEN_RUNNING,	/* remoteproc says "running" */
+	SEV_SEEN_OFFLINE,	/* remoteproc says "offline" */
+	SEV_CRASH_REPORTED,	/* a stall reported through report_crash */
+	SEV_ATTACHED,		/* the servo attached and has the parameter set */
+	SEV_RECOVERY_TIMEOUT,	/* no attach within RECOVERY_TIMEOUT_S of the report */
+};
+
+#define RECOVERY_TIMEOUT_S 20
+
+struct session {
+	enum session_state state;	/* written under sd->lock by the main thread */
+	uint32_t epoch;			/* of the region servod initialised */
+	uint32_t restored_attach;	/* attach_count whose parameters were loaded */
+	struct timespec recover_t0;	/* when the crash was reported */
+	int waiting_logged;		/* CLOSED: "waiting until it is offline" said once */
+	atomic_int stall_pending;	/* the cycle thread saw a stall: report it */
+};
+
+/* The state after ev in state s (unchanged when ev does not apply). */
+enum session_state session_next(enum session_state s, enum session_event ev);
+/* Applies ev: the caller holds sd->lock when it opens or closes the session. */
+void session_event(struct session *ss, enum session_event ev);
+
+static inline int session_open(const struct session *ss)
+{
+	return ss->state != SESSION_CLOSED;
+}
+
+static inline int session_recovering(const struct session *ss)
+{
+	return ss->state == SESSION_RECOVERING;
+}
+
+#endif
