@@ -28,7 +28,6 @@
 #include <unistd.h>
 
 #include "motion/motion.h"
-#include "motion/sched.h"
 
 static double now_s(void)
 {

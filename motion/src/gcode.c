@@ -1,5 +1,5 @@
 /* SPDX-License-Identifier: MIT */
-#include "motion/gcode.h"
+#include "gcode.h"
 
 #include <math.h>
 #include <stdarg.h>

@@ -8,7 +8,7 @@
 
 #include "check.h"
 #include "motion/ring.h"
-#include "motion/sched.h"
+#include "scheduler.h"
 
 static struct sched_dstate D(uint8_t o, uint32_t ul, uint32_t dl, uint32_t cap,
 			     bool running)

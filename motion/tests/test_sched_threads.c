@@ -13,7 +13,8 @@
 
 #include "check.h"
 #include "motion/ring.h"
-#include "motion/sched.h"
+#include "mono_clock.h"
+#include "scheduler.h"
 
 #define NT 6
 #define ITEMS 150
@@ -37,10 +38,10 @@ struct ctask {
 
 static void spin_us(unsigned us)
 {
-	uint64_t end = sched_now_us() + us;
+	uint64_t end = mono_now_us() + us;
 	volatile uint64_t x = 0;
 
-	while (sched_now_us() < end)
+	while (mono_now_us() < end)
 		x++;
 }
 
@@ -133,17 +134,17 @@ static uint64_t run_pool(unsigned workers, struct chain *c, struct sched_stats *
 	struct sched *s = sched_create(MOTION_POLICY_HYBRID, td, NT + 2, 0);
 	if (!s)
 		return 0;
-	uint64_t t0 = sched_now_us();
+	uint64_t t0 = mono_now_us();
 	if (sched_start(s, workers)) {
 		sched_destroy(s);
 		return 0;
 	}
 	sched_kick(s);
-	while (atomic_load(&c->delivered) < ITEMS && sched_now_us() - t0 < 30000000u) {
+	while (atomic_load(&c->delivered) < ITEMS && mono_now_us() - t0 < 30000000u) {
 		struct timespec ts = { 0, 200000 };
 		nanosleep(&ts, NULL);
 	}
-	*elapsed = sched_now_us() - t0;
+	*elapsed = mono_now_us() - t0;
 	sched_stop(s);
 	sched_get_stats(s, st);
 	sched_destroy(s);
