@@ -89,6 +89,96 @@ static int parse_number(const char *s, size_t len, size_t *pos, double *out,
 	return 0;
 }
 
+/* A line that holds only '%' (the program delimiter) and blanks. */
+static bool lone_percent(const char *s, size_t len)
+{
+	size_t a = 0, b = len;
+
+	while (a < b && (s[a] == ' ' || s[a] == '\t' || s[a] == '\r'))
+		a++;
+	while (b > a && (s[b - 1] == ' ' || s[b - 1] == '\t' || s[b - 1] == '\r'))
+		b--;
+	return b - a == 1 && s[a] == '%';
+}
+
+/* A ( ) comment starting at s[*i]; *i moves past its ')'. */
+static int skip_comment(const char *s, size_t len, size_t *i, uint32_t line,
+			struct motion_error *err)
+{
+	size_t j = *i + 1;
+
+	while (j < len && s[j] != ')') {
+		if (s[j] == '(')
+			return gc_fail(err, MOTION_E_SYNTAX, line, (uint32_t)j + 1u,
+				       "nested comment");
+		j++;
+	}
+	if (j >= len)
+		return gc_fail(err, MOTION_E_SYNTAX, line, (uint32_t)*i + 1u,
+			       "unclosed comment");
+	*i = j + 1;
+	return 0;
+}
+
+/* Adds the word L v found at column col to *ws. */
+static int add_word(struct words *ws, char L, double v, uint32_t col,
+		    bool *blank, uint32_t line, struct motion_error *err)
+{
+	if (*blank)
+		ws->first_col = (uint16_t)col;
+	switch (L) {
+	case 'N':
+		if (!*blank)
+			return gc_fail(err, MOTION_E_SYNTAX, line, col,
+				       "line number N must come first");
+		if (v < 0 || v != floor(v))
+			return gc_fail(err, MOTION_E_NUMBER, line, col,
+				       "line number must be a non-negative integer");
+		ws->first_col = 0;
+		break;
+	case 'G': {
+		double t = v * 10.0;
+		long code10 = lround(t);
+		if (v < 0 || fabs(t - (double)code10) > 1e-6)
+			return gc_fail(err, MOTION_E_NUMBER, line, col,
+				       "invalid G-code number G%g", v);
+		if (ws->ng >= 8)
+			return gc_fail(err, MOTION_E_MODAL, line, col,
+				       "too many G-codes in one block");
+		ws->g[ws->ng].code10 = (int)code10;
+		ws->g[ws->ng].col = (uint16_t)col;
+		ws->ng++;
+		break;
+	}
+	case 'M':
+		if (v < 0 || v != floor(v))
+			return gc_fail(err, MOTION_E_NUMBER, line, col,
+				       "invalid M-code number M%g", v);
+		if (ws->nm >= 4)
+			return gc_fail(err, MOTION_E_MODAL, line, col,
+				       "too many M-codes in one block");
+		ws->m[ws->nm].code = (int)v;
+		ws->m[ws->nm].col = (uint16_t)col;
+		ws->nm++;
+		break;
+	case 'F': case 'X': case 'Y': case 'Z': case 'A':
+	case 'B': case 'C': case 'I': case 'J': case 'K':
+	case 'R': case 'P':
+		if (HAVE(ws, L))
+			return gc_fail(err, MOTION_E_MODAL, line, col,
+				       "word '%c' appears twice", L);
+		ws->have |= 1u << (L - 'A');
+		W(ws, L).v = v;
+		W(ws, L).col = (uint16_t)col;
+		break;
+	default:
+		return gc_fail(err, MOTION_E_UNSUPPORTED, line, col,
+			       "unsupported word '%c'", L);
+	}
+	*blank = false;
+	return 0;
+}
+
 int gc_lex(const char *s, size_t len, uint32_t line, struct words *ws,
 	   bool *blank, struct motion_error *err)
 {
@@ -96,17 +186,8 @@ int gc_lex(const char *s, size_t len, uint32_t line, struct words *ws,
 
 	memset(ws, 0, sizeof(*ws));
 	*blank = true;
-	/* a lone '%' (program delimiter) is ignored */
-	{
-		size_t a = 0, b = len;
-		while (a < b && (s[a] == ' ' || s[a] == '\t' || s[a] == '\r'))
-			a++;
-		while (b > a && (s[b - 1] == ' ' || s[b - 1] == '\t' ||
-				 s[b - 1] == '\r'))
-			b--;
-		if (b - a == 1 && s[a] == '%')
-			return 0;
-	}
+	if (lone_percent(s, len)) /* a program delimiter: ignored */
+		return 0;
 	while (i < len) {
 		char c = s[i];
 		uint32_t col = (uint32_t)i + 1u;
@@ -117,23 +198,13 @@ int gc_lex(const char *s, size_t len, uint32_t line, struct words *ws,
 		if (c == ';')
 			break;
 		if (c == '(') {
-			size_t j = i + 1;
-			while (j < len && s[j] != ')') {
-				if (s[j] == '(')
-					return gc_fail(err, MOTION_E_SYNTAX, line,
-						    (uint32_t)j + 1u,
-						    "nested comment");
-				j++;
-			}
-			if (j >= len)
-				return gc_fail(err, MOTION_E_SYNTAX, line, col,
-					    "unclosed comment");
-			i = j + 1;
+			if (skip_comment(s, len, &i, line, err))
+				return -1;
 			continue;
 		}
 		if (c == ')')
 			return gc_fail(err, MOTION_E_SYNTAX, line, col,
-				    "')' without '('");
+				       "')' without '('");
 		if ((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z')) {
 			char L = (char)(c & ~0x20);
 			const char *why = NULL;
@@ -143,67 +214,16 @@ int gc_lex(const char *s, size_t len, uint32_t line, struct words *ws,
 				i++;
 			if (parse_number(s, len, &i, &v, &why))
 				return gc_fail(err, MOTION_E_NUMBER, line, col,
-					    "%s after '%c'", why, L);
-			if (*blank)
-				ws->first_col = (uint16_t)col;
-			switch (L) {
-			case 'N':
-				if (!*blank)
-					return gc_fail(err, MOTION_E_SYNTAX, line, col,
-						    "line number N must come first");
-				if (v < 0 || v != floor(v))
-					return gc_fail(err, MOTION_E_NUMBER, line, col,
-						    "line number must be a non-negative integer");
-				*blank = false;
-				ws->first_col = 0;
-				continue;
-			case 'G': {
-				double t = v * 10.0;
-				long code10 = lround(t);
-				if (v < 0 || fabs(t - (double)code10) > 1e-6)
-					return gc_fail(err, MOTION_E_NUMBER, line, col,
-						    "invalid G-code number G%g", v);
-				if (ws->ng >= 8)
-					return gc_fail(err, MOTION_E_MODAL, line, col,
-						    "too many G-codes in one block");
-				ws->g[ws->ng].code10 = (int)code10;
-				ws->g[ws->ng].col = (uint16_t)col;
-				ws->ng++;
-				break;
-			}
-			case 'M':
-				if (v < 0 || v != floor(v))
-					return gc_fail(err, MOTION_E_NUMBER, line, col,
-						    "invalid M-code number M%g", v);
-				if (ws->nm >= 4)
-					return gc_fail(err, MOTION_E_MODAL, line, col,
-						    "too many M-codes in one block");
-				ws->m[ws->nm].code = (int)v;
-				ws->m[ws->nm].col = (uint16_t)col;
-				ws->nm++;
-				break;
-			case 'F': case 'X': case 'Y': case 'Z': case 'A':
-			case 'B': case 'C': case 'I': case 'J': case 'K':
-			case 'R': case 'P':
-				if (HAVE(ws, L))
-					return gc_fail(err, MOTION_E_MODAL, line, col,
-						    "word '%c' appears twice", L);
-				ws->have |= 1u << (L - 'A');
-				W(ws, L).v = v;
-				W(ws, L).col = (uint16_t)col;
-				break;
-			default:
-				return gc_fail(err, MOTION_E_UNSUPPORTED, line, col,
-					    "unsupported word '%c'", L);
-			}
-			*blank = false;
+					       "%s after '%c'", why, L);
+			if (add_word(ws, L, v, col, blank, line, err))
+				return -1;
 			continue;
 		}
 		if ((unsigned char)c >= 0x20 && (unsigned char)c < 0x7f)
 			return gc_fail(err, MOTION_E_SYNTAX, line, col,
-				    "unexpected character '%c'", c);
+				       "unexpected character '%c'", c);
 		return gc_fail(err, MOTION_E_SYNTAX, line, col,
-			    "unexpected character 0x%02x", (unsigned char)c);
+			       "unexpected character 0x%02x", (unsigned char)c);
 	}
 	return 0;
 }

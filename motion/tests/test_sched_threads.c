@@ -1,9 +1,9 @@
 /* SPDX-License-Identifier: MIT */
-/* The hybrid scheduler on a pool of worker threads: seed 003's test with
- * 2 periodic tasks and 6 chained data tasks, 150 items placed upstream,
+/* The hybrid scheduler on a pool of worker threads: the balance
+ * experiment of the scheduler's design (docs/motion.md) with 2 periodic tasks and 6 chained data tasks, 150 items placed upstream,
  * each job a fixed amount of busy work.  Checks rule 1 under real
  * concurrency, item order, periodic service, and that every core gets a
- * fair share of the jobs (seed 003, table 1). */
+ * fair share of the jobs (as in table 1 of that design). */
 #define _POSIX_C_SOURCE 200809L
 #include <stdatomic.h>
 #include <stdio.h>
