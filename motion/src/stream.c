@@ -32,12 +32,6 @@ void stream_free(struct stream *s)
 	pthread_mutex_destroy(&s->flow_lock);
 }
 
-uint32_t stream_level(const struct stream *s)
-{
-	return atomic_load_explicit(&s->tail, memory_order_acquire) -
-	       atomic_load_explicit(&s->head, memory_order_acquire);
-}
-
 uint32_t stream_backlog(const struct stream *s)
 {
 	return s->mem ? (uint32_t)(s->text_len - s->text_pos) : stream_level(s);
@@ -171,27 +165,6 @@ int stream_next_line(struct stream *s, char *line, size_t *n)
 		return 1;
 	}
 	return 0;
-}
-
-uint32_t stream_avail(const struct stream *s)
-{
-	if (s->mem)
-		return s->text_lines - s->text_lines_out;
-	uint32_t lines = atomic_load_explicit(&s->lines_in, memory_order_acquire) -
-			 s->lines_out;
-	if (lines)
-		return lines;
-	uint32_t lvl = stream_level(s);
-	if (lvl > MOTION_MAX_LINE)
-		return 1;
-	if (lvl > 0 && atomic_load(&s->eos))
-		return 1;
-	return 0;
-}
-
-bool stream_eof(const struct stream *s)
-{
-	return atomic_load(&s->eos) && stream_avail(s) == 0;
 }
 
 void stream_discard(struct stream *s)

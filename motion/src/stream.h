@@ -61,7 +61,12 @@ void stream_end(struct stream *s);
 void stream_load(struct stream *s, const char *text, size_t len);
 
 /* Bytes buffered in the byte ring. */
-uint32_t stream_level(const struct stream *s);
+static inline uint32_t stream_level(const struct stream *s)
+{
+	return atomic_load_explicit(&s->tail, memory_order_acquire) -
+	       atomic_load_explicit(&s->head, memory_order_acquire);
+}
+
 /* What is left to decode: bytes in the ring, or of the program. */
 uint32_t stream_backlog(const struct stream *s);
 
@@ -70,10 +75,30 @@ uint32_t stream_backlog(const struct stream *s);
  * complete line is available, 2 if the line is too long (consumed up to
  * MOTION_MAX_LINE + 1 characters). */
 int stream_next_line(struct stream *s, char *line, size_t *n);
-/* Lines (or the equivalent) the decoder can take now. */
-uint32_t stream_avail(const struct stream *s);
+/* Lines (or the equivalent) the decoder can take now (the scheduler asks
+ * at every decision, hence inline). */
+static inline uint32_t stream_avail(const struct stream *s)
+{
+	if (s->mem)
+		return s->text_lines - s->text_lines_out;
+	uint32_t lines = atomic_load_explicit(&s->lines_in, memory_order_acquire) -
+			 s->lines_out;
+	if (lines)
+		return lines;
+	uint32_t lvl = stream_level(s);
+	if (lvl > MOTION_MAX_LINE)
+		return 1;
+	if (lvl > 0 && atomic_load(&s->eos))
+		return 1;
+	return 0;
+}
+
 /* The input has ended and every line was taken. */
-bool stream_eof(const struct stream *s);
+static inline bool stream_eof(const struct stream *s)
+{
+	return atomic_load(&s->eos) && stream_avail(s) == 0;
+}
+
 /* Drops everything buffered (after the end of the program or an error). */
 void stream_discard(struct stream *s);
 /* Lines the decoder has taken so far. */
