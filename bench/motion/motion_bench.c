@@ -28,7 +28,6 @@
 #include <unistd.h>
 
 #include "motion/motion.h"
-#include "motion/sched.h"
 
 static double now_s(void)
 {
@@ -273,7 +272,7 @@ static int sched_experiment(const struct motion_config *h, const char *prog,
 	cf[1].name = "hybrid_n"; cf[1].w = workers; cf[1].pol = MOTION_POLICY_HYBRID;
 	cf[2].name = "fifo_1"; cf[2].w = 1; cf[2].pol = MOTION_POLICY_FIFO;
 	cf[3].name = "fifo_n"; cf[3].w = workers; cf[3].pol = MOTION_POLICY_FIFO;
-	/* seed 003's rule 2 as written: a task may run on a single item */
+	/* the hybrid scheduler's rule 2 as written: a task may run on a single item */
 	cf[4].name = "hybrid_n_rule2"; cf[4].w = workers; cf[4].pol = MOTION_POLICY_HYBRID;
 	cf[4].min_job = 1;
 	struct result *ref = &x->ref;

@@ -3,7 +3,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "internal.h"
+#include "plan.h"
 
 double plan_trans_time(double dv, double a, double j, bool jerk)
 {

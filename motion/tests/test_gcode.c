@@ -8,7 +8,7 @@
 #include <string.h>
 
 #include "check.h"
-#include "motion/gcode.h"
+#include "gcode.h"
 
 static struct motion_config cfg3(void)
 {

@@ -436,7 +436,7 @@ static int t_limits_per_axis(void)
 	c.axis[0].vmax = 300; c.axis[0].amax = 5000;
 	c.axis[1].vmax = 40;  c.axis[1].amax = 300;
 	c.axis[2].vmax = 10;  c.axis[2].amax = 100;
-	c.period_us = 2000; /* seed 003 ran at 2 ms */
+	c.period_us = 2000; /* the scheduler's design ran at 2 ms */
 	r = limits_ok(&c, p);
 	free(p);
 	return r;

@@ -14,7 +14,7 @@
 #include <string.h>
 
 #include "check.h"
-#include "internal.h"
+#include "plan.h"
 
 static uint64_t rng = 0x9e3779b97f4a7c15ull;
 

@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
-/* Hybrid scheduler: the decision rules (pure function) and the seed 003
- * experiment run synchronously (150 items upstream, 6 chained tasks). */
+/* Hybrid scheduler: the decision rules (pure function) and the balance
+ * experiment of its design (docs/motion.md) run synchronously (150 items upstream, 6 chained tasks). */
 #define _POSIX_C_SOURCE 200809L
 #include <stdio.h>
 #include <stdlib.h>
@@ -8,7 +8,7 @@
 
 #include "check.h"
 #include "motion/ring.h"
-#include "motion/sched.h"
+#include "scheduler.h"
 
 static struct sched_dstate D(uint8_t o, uint32_t ul, uint32_t dl, uint32_t cap,
 			     bool running)
@@ -192,7 +192,7 @@ static int t_random_vs_reference(void)
 	return 0;
 }
 
-/* ---- seed 003: 6 chained data tasks, 150 items placed upstream ---------- */
+/* ---- the balance experiment: 6 chained data tasks, 150 items upstream -- */
 
 #define NT 6
 struct chain {

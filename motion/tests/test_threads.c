@@ -11,7 +11,7 @@
 #include <time.h>
 
 #include "check.h"
-#include "motion/sched.h"
+#include "mono_clock.h"
 
 /* Many short arcs along a zigzag (planning heavy), a few lines. */
 static char *gen_program(int n)
@@ -157,15 +157,15 @@ static int t_realtime_send(void)
 	CHECK(motion_create(&c, &m, &e) == 0, "%s", e.msg);
 	CHECK(motion_load_program(m, prog, strlen(prog)) == 0, "load");
 	CHECK(motion_start(m, 2) == 0, "start");
-	uint64_t t0 = sched_now_us();
+	uint64_t t0 = mono_now_us();
 	while (atomic_load(&r->last) != MOTION_ST_DONE &&
 	       atomic_load(&r->last) != MOTION_ST_FAULT &&
 	       atomic_load(&r->last) != MOTION_ST_UNDERRUN &&
-	       sched_now_us() - t0 < 20000000u) {
+	       mono_now_us() - t0 < 20000000u) {
 		struct timespec ts = { 0, 1000000 };
 		nanosleep(&ts, NULL);
 	}
-	uint64_t el = sched_now_us() - t0;
+	uint64_t el = mono_now_us() - t0;
 	motion_stop(m);
 	r->tr.n = atomic_load(&r->n);
 	struct motion_stats s;
@@ -232,9 +232,9 @@ static int t_wait(void)
 	CHECK(motion_create(&c, &m, &e) == 0, "create: %s", e.msg);
 	CHECK(motion_stream_write(m, "G1 X1 F600\n", 11) == 11, "write");
 	CHECK(motion_start(m, 2) == 0, "start");
-	uint64_t t0 = sched_now_us();
+	uint64_t t0 = mono_now_us();
 	CHECK(motion_wait(m, 50) == -1, "wait returned 0 on an open stream");
-	uint64_t dt = sched_now_us() - t0;
+	uint64_t dt = mono_now_us() - t0;
 	CHECK(dt >= 45000u, "timed out after %llu us, asked 50 ms",
 	      (unsigned long long)dt);
 	CHECK(!motion_done(m), "done with an open stream");

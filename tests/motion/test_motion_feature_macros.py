@@ -2,9 +2,9 @@
 line, as a program that wants CPU affinity or SCHED_FIFO (servod) would build
 them.  glibc then defines more names (e.g. SCHED_IDLE, a Linux scheduling
 policy, as a macro), and the scheduler's choice kinds used one of those
-names: a file that included <pthread.h> first did not compile, and sched.c,
-which included it after, dispatched "idle" as 5, so the synchronous pipeline
-spun forever."""
+names: a file that included <pthread.h> first did not compile, and the
+scheduler (motion/src/scheduler.c), which included it after, dispatched
+"idle" as 5, so the synchronous pipeline spun forever."""
 from __future__ import annotations
 
 import subprocess

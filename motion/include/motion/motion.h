@@ -5,7 +5,7 @@
  *   stream/program -> decode -> fit -> look-ahead -> accel -> interp -> setpoints
  *
  * Each arrow is a bounded ring buffer; each stage is a data-dependent task
- * scheduled by the hybrid scheduler of sched.h (seed 003).  The daemon calls
+ * of the library's hybrid data-flow scheduler.  The daemon calls
  * motion_next_setpoint() once per cycle; that call never allocates.
  *
  * Units: millimetres, seconds.  Setpoints are int32 increments
@@ -61,7 +61,7 @@ struct motion_axis_limits {
 };
 
 enum motion_policy {
-	MOTION_POLICY_HYBRID = 0, /* seed 003 rules */
+	MOTION_POLICY_HYBRID = 0, /* the hybrid scheduler's rules */
 	MOTION_POLICY_FIFO,       /* plain FIFO (round robin) over runnable tasks */
 };
 
@@ -111,8 +111,8 @@ struct motion_config {
 	uint32_t min_job;          /* whole jobs: while a neighbour task runs,
 				      a task waits for this many items
 				      upstream / this much room downstream
-				      (0: batch; 1: off, seed 003's rule 2
-				      as written); see sched_gate() */
+				      (0: batch; 1: off, the hybrid scheduler's
+				      rule 2 as written); see docs/motion.md */
 	enum motion_policy policy;
 	/* threaded mode: optional periodic "position send" task run by the
 	 * worker pool at period_us; it calls motion_next_setpoint() and hands

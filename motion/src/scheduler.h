@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * Hybrid real-time scheduler of seed 003.
+ * The hybrid real-time scheduler (internal to libmotion): it runs the
+ * pipeline's stages as tasks, in threaded mode on a pool of workers.
  *
  * Periodic tasks are (P, T): priority (0 = highest) and period.  Data-
  * dependent tasks are (O, UL, DL): position in the chain, items buffered
@@ -15,8 +16,8 @@
  * The pool runs one worker thread per core; every decision is taken under
  * one mutex, jobs run outside it.
  */
-#ifndef SERVOAMP_MOTION_SCHED_H
-#define SERVOAMP_MOTION_SCHED_H
+#ifndef SERVOAMP_MOTION_SCHEDULER_H
+#define SERVOAMP_MOTION_SCHEDULER_H
 
 #include <stdbool.h>
 #include <stddef.h>
@@ -127,7 +128,5 @@ struct sched_stats {
 	uint64_t sched_ns[SCHED_MAX_WORKERS];
 };
 void sched_get_stats(struct sched *s, struct sched_stats *st);
-
-uint64_t sched_now_us(void);
 
 #endif

@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
-#include "motion/sched.h"
+#include "scheduler.h"
 
 #include <errno.h>
 #include <pthread.h>
@@ -8,6 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+
+#include "mono_clock.h"
 
 struct sched_choice sched_decide(enum motion_policy policy,
 				 const struct sched_pstate *p, size_t np,
@@ -84,22 +86,6 @@ void sched_gate(struct sched_dstate *d, size_t nd, uint32_t min_job)
 	}
 }
 
-static uint64_t now_ns(void)
-{
-	struct timespec ts;
-
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000u + (uint64_t)ts.tv_nsec;
-}
-
-uint64_t sched_now_us(void)
-{
-	struct timespec ts;
-
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
-}
-
 struct task {
 	struct sched_task_desc d;
 	bool running;
@@ -163,7 +149,7 @@ struct sched *sched_create(enum motion_policy policy,
 		return NULL;
 	s->policy = policy;
 	s->n = n;
-	s->t0 = sched_now_us();
+	s->t0 = mono_now_us();
 	for (size_t i = 0; i < n; i++) {
 		s->t[i].d = tasks[i];
 		if (tasks[i].periodic) {
@@ -245,7 +231,7 @@ void sched_sample(struct sched *s)
 	s->sample(s->sample_arg, v);
 	pthread_mutex_lock(&s->trace_lock);
 	if (s->trace_n < s->trace_cap) {
-		s->trace_t[s->trace_n] = sched_now_us() - s->t0;
+		s->trace_t[s->trace_n] = mono_now_us() - s->t0;
 		memcpy(&s->trace_v[(size_t)s->trace_n * SCHED_MAX_LEVELS], v,
 		       sizeof(v));
 		s->trace_n++;
@@ -333,7 +319,7 @@ static uint64_t next_release_locked(const struct sched *s)
 struct sched_choice sched_step(struct sched *s)
 {
 	struct sched_choice c;
-	uint64_t now = sched_now_us();
+	uint64_t now = mono_now_us();
 	int ti;
 
 	pthread_mutex_lock(&s->lock);
@@ -346,9 +332,9 @@ struct sched_choice sched_step(struct sched *s)
 	ti = claim_locked(s, c, now);
 	pthread_mutex_unlock(&s->lock);
 
-	uint64_t b0 = now_ns();
+	uint64_t b0 = mono_now_ns();
 	uint32_t items = s->t[ti].d.run(s->t[ti].d.arg, 0);
-	uint64_t b1 = now_ns();
+	uint64_t b1 = mono_now_ns();
 
 	pthread_mutex_lock(&s->lock);
 	s->t[ti].busy_ns += b1 - b0;
@@ -366,7 +352,7 @@ static void *worker_main(void *arg)
 	int prev = -1;
 	uint32_t prev_items = 0;
 	uint64_t prev_ns = 0;
-	uint64_t born = now_ns();
+	uint64_t born = mono_now_ns();
 
 	pthread_mutex_lock(&s->lock);
 	for (;;) {
@@ -387,35 +373,31 @@ static void *worker_main(void *arg)
 		 * (sched_kick pairs with this). */
 		atomic_fetch_add(&s->waiting, 1);
 		atomic_thread_fence(memory_order_seq_cst);
-		uint64_t now = sched_now_us();
+		uint64_t now = mono_now_us();
 		struct sched_choice c = decide_locked(s, now);
 		if (c.kind == SCHED_CHOICE_IDLE) {
 			uint64_t wake = next_release_locked(s);
 			if (wake > now + 2000u)
 				wake = now + 2000u; /* safety poll */
 			struct timespec ts;
-			clock_gettime(CLOCK_MONOTONIC, &ts);
-			uint64_t ns = (uint64_t)ts.tv_nsec +
-				      (wake > now ? wake - now : 0) * 1000u;
-			ts.tv_sec += (time_t)(ns / 1000000000u);
-			ts.tv_nsec = (long)(ns % 1000000000u);
+			mono_deadline(&ts, (wake > now ? wake - now : 0) * 1000u);
 			s->idle[w->id]++;
-			uint64_t z0 = now_ns();
+			uint64_t z0 = mono_now_ns();
 			int rc = pthread_cond_timedwait(&s->cond, &s->lock, &ts);
 			(void)rc;
-			s->sleep_ns[w->id] += now_ns() - z0;
+			s->sleep_ns[w->id] += mono_now_ns() - z0;
 			atomic_fetch_sub(&s->waiting, 1);
 			continue;
 		}
 		atomic_fetch_sub(&s->waiting, 1);
 		prev = claim_locked(s, c, now);
 		pthread_mutex_unlock(&s->lock);
-		uint64_t b0 = now_ns();
+		uint64_t b0 = mono_now_ns();
 		prev_items = s->t[prev].d.run(s->t[prev].d.arg, w->id);
-		prev_ns = now_ns() - b0;
+		prev_ns = mono_now_ns() - b0;
 		pthread_mutex_lock(&s->lock);
 	}
-	s->life_ns[w->id] += now_ns() - born;
+	s->life_ns[w->id] += mono_now_ns() - born;
 	pthread_mutex_unlock(&s->lock);
 	return NULL;
 }
@@ -427,7 +409,7 @@ int sched_start(struct sched *s, unsigned workers)
 	atomic_store(&s->stop, false);
 	s->workers = workers;
 	atomic_store(&s->started, true);
-	uint64_t now = sched_now_us();
+	uint64_t now = mono_now_us();
 	for (size_t i = 0; i < s->np; i++) {
 		struct task *t = &s->t[s->pidx[i]];
 		t->next_release = now + t->d.period_us;

@@ -1,0 +1,147 @@
+/* SPDX-License-Identifier: MIT */
+/* The consumer end: the per-cycle call and the tasks that stand in for it
+ * (see cycle.h). */
+#include "cycle.h"
+
+#include <string.h>
+
+#include "items.h"
+#include "pipeline_state.h"
+
+/* ---- benchmark sink ------------------------------------------------------ */
+
+void sink_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
+{
+	struct motion *m = arg;
+
+	*ul = ring_count(&m->q[Q_SETPOINTS]);
+	*dl = 0;
+	*dcap = 1;
+}
+
+uint32_t sink_run(void *arg, unsigned worker)
+{
+	struct motion *m = arg;
+	struct consumer *o = &m->out;
+	struct ring *q = &m->q[Q_SETPOINTS];
+	const int32_t *c;
+	int32_t last[1 + 2 * MOTION_MAX_AXES];
+	uint32_t done = 0;
+
+	(void)worker;
+	while (done < m->cfg.batch * 4 && (c = ring_front(q)) != NULL) {
+		for (uint32_t k = 0; k < m->na; k++)
+			o->sink_sum += (uint64_t)(uint32_t)c[1 + k];
+		memcpy(last, c, q->elem);
+		ring_release(q);
+		o->cycle++;
+		done++;
+	}
+	if (done)
+		sp_unpack(m->na, last, &o->last);
+	atomic_fetch_add_explicit(&o->n_setpoints, done, memory_order_relaxed);
+	if (done)
+		pipeline_notify_end(m);
+	return done;
+}
+
+/* ---- periodic send task (threaded mode) ---------------------------------- */
+
+uint32_t send_run(void *arg, unsigned worker)
+{
+	struct motion *m = arg;
+	struct motion_setpoint sp;
+
+	(void)worker;
+	if (!m->threaded)
+		return 0;
+	motion_next_setpoint(m, &sp);
+	m->cfg.send_cb(m->cfg.send_user, &sp);
+	return 1;
+}
+
+/* ---- the per-cycle call -------------------------------------------------- */
+
+uint32_t motion_pump(struct motion *m, uint32_t max_jobs)
+{
+	uint32_t n = 0;
+
+	if (m->threaded)
+		return 0;
+	while (n < max_jobs) {
+		struct sched_choice c = sched_step(m->sched);
+		if (c.kind == SCHED_CHOICE_IDLE)
+			break;
+		n++;
+	}
+	return n;
+}
+
+/* The last position again, at rest, with status st. */
+static enum motion_status hold(struct motion *m, struct motion_setpoint *out,
+			       enum motion_status st)
+{
+	*out = m->out.last;
+	memset(out->vel, 0, sizeof(out->vel));
+	out->cycle = m->out.cycle++;
+	out->status = (uint8_t)st;
+	return st;
+}
+
+/* Synchronous mode: run the pipeline until a setpoint is ready (or nothing
+ * can run), and take a queue-level sample every monitor period. */
+static void run_synchronous(struct motion *m, const struct ring *q)
+{
+	while (ring_count(q) == 0) {
+		struct sched_choice c = sched_step(m->sched);
+		if (c.kind == SCHED_CHOICE_IDLE)
+			break;
+	}
+	if (m->cfg.trace_samples) {
+		uint32_t every = m->cfg.monitor_period_us / m->cfg.period_us;
+		if (m->out.cycle % (every ? every : 1u) == 0)
+			sched_sample(m->sched);
+	}
+}
+
+/* No setpoint ready: done, idle, or (moving) an underrun. */
+static enum motion_status no_setpoint(struct motion *m,
+				      struct motion_setpoint *out)
+{
+	bool faulted = pipeline_faulted(m);
+	if (atomic_load(&m->ip.done))
+		return hold(m, out, faulted ? MOTION_ST_FAULT : MOTION_ST_DONE);
+	if (!atomic_load(&m->ip.moving))
+		return hold(m, out, MOTION_ST_IDLE);
+	/* moving, and no setpoint: the planner fell behind */
+	m->out.underrun = true;
+	atomic_fetch_add(&m->out.n_underruns, 1);
+	pipeline_fail(m, MOTION_E_UNDERRUN, 0, 0,
+		      "setpoint underrun at cycle %llu: the pipeline fell behind",
+		      (unsigned long long)m->out.cycle);
+	return hold(m, out, MOTION_ST_UNDERRUN);
+}
+
+enum motion_status motion_next_setpoint(struct motion *m,
+					 struct motion_setpoint *out)
+{
+	struct ring *q = &m->q[Q_SETPOINTS];
+
+	if (m->out.underrun)
+		return hold(m, out, MOTION_ST_UNDERRUN);
+	if (!m->threaded)
+		run_synchronous(m, q);
+	const int32_t *c = ring_front(q);
+	if (!c)
+		return no_setpoint(m, out);
+	sp_unpack(m->na, c, out);
+	ring_release(q);
+	out->cycle = m->out.cycle++;
+	m->out.last = *out;
+	atomic_fetch_add_explicit(&m->out.n_setpoints, 1, memory_order_relaxed);
+	if (m->threaded) {
+		sched_kick(m->sched);
+		pipeline_notify_end(m);
+	}
+	return MOTION_ST_MOVING;
+}

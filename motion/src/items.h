@@ -1,0 +1,112 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * The items that travel between the pipeline's stages, one ring each:
+ *
+ *   stream bytes -> decode -> struct gc_block (gcode.h)
+ *                -> fit    -> struct seg
+ *                -> look-ahead -> struct planned
+ *                -> accel  -> struct timed
+ *                -> interp -> compact setpoint (int32 words, below)
+ *                -> motion_next_setpoint(): struct motion_setpoint
+ */
+#ifndef SERVOAMP_MOTION_ITEMS_H
+#define SERVOAMP_MOTION_ITEMS_H
+
+#include <math.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "motion/motion.h"
+#include "motion/ring.h"
+
+enum seg_kind { SEG_MOVE = 1, SEG_DWELL, SEG_END };
+
+/* A straight segment (output of curve fitting), sized by the number of
+ * axes: x[] holds p0[n], p1[n] and u[n] (n = config.n_axes; the other
+ * axes never move, so they are not stored).  A segment is written once,
+ * by the fitter, into a slot of the segment ring, and the later stages
+ * refer to that slot by its index instead of copying the geometry along
+ * the chain: the ring's storage is larger than its capacity (see
+ * motion_create), so a slot is not reused before interpolation is done
+ * with it. */
+struct seg {
+	uint8_t kind;
+	uint32_t line;
+	double len;   /* mm */
+	double vmax;  /* path speed cap: feed, axis velocities, len / period */
+	double amax;  /* path acceleration: (1 - share) of the axis budgets */
+	double jmax;  /* path jerk (jerk-limited mode) */
+	double dwell; /* s */
+	double x[];   /* p0[n], p1[n], u[n] */
+};
+
+#define SEG_P0(s, n) ((s)->x)
+#define SEG_P1(s, n) ((s)->x + (n))
+#define SEG_U(s, n) ((s)->x + 2 * (n))
+
+static inline size_t seg_size(uint32_t n_axes)
+{
+	return sizeof(struct seg) + 3u * n_axes * sizeof(double);
+}
+
+/* A segment by its position in the segment ring (see struct seg). */
+static inline const struct seg *seg_at(const struct ring *segs, uint32_t pos)
+{
+	return ring_at(segs, pos);
+}
+
+/* A segment with its planned entry and exit speeds (look-ahead output):
+ * the segment by reference (slot index in the segment ring). */
+struct planned {
+	uint32_t seg;
+	uint8_t kind;
+	double v0, v1;
+};
+
+/* Accel-planning output: the segment (by reference) with its entry, peak
+ * and exit speeds, 32 bytes.  Finding the peak speed is the planning
+ * (a bisection in jerk-limited mode); the interpolator expands the timed
+ * profile (plan.h) from these three speeds when it takes the segment, so
+ * that only 32 bytes per segment travel between the two stages. */
+struct timed {
+	uint32_t seg;
+	uint8_t kind;
+	double v0, vp, v1;
+};
+
+/* Setpoints travel through their ring compactly, sized by the number of
+ * axes n: int32 line, pos[n], vel[n] (status MOVING, cycle assigned by the
+ * consumer).  sp_unpack() makes the public struct motion_setpoint. */
+static inline size_t sp_size(uint32_t n_axes)
+{
+	return (1u + 2u * n_axes) * sizeof(int32_t);
+}
+
+static inline void sp_unpack(uint32_t n, const int32_t *c,
+			     struct motion_setpoint *sp)
+{
+	memset(sp, 0, sizeof(*sp));
+	sp->n_axes = (uint8_t)n;
+	sp->line = (uint32_t)c[0];
+	sp->status = MOTION_ST_MOVING;
+	memcpy(sp->pos, c + 1, n * sizeof(int32_t));
+	memcpy(sp->vel, c + 1 + n, n * sizeof(int32_t));
+}
+
+/* Millimetres (or mm/s) times increments per mm to int32 increments,
+ * rounded to nearest and saturated. */
+static inline int32_t to_inc(double v)
+{
+	double r = nearbyint(v);
+	if (r != r)
+		return 0; /* not reached: positions are finite */
+	if (r > 2147483647.0)
+		return INT32_MAX;
+	if (r < -2147483648.0)
+		return INT32_MIN;
+	return (int32_t)r;
+}
+
+#endif
