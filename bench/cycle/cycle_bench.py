@@ -1,9 +1,14 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: MIT
-"""Figures of the cycle on the emulated board (QEMU), one boot per TCG mode.
+"""Figures of the cycle on the emulated board (QEMU), one boot per mode.
 
     .venv/bin/python bench/cycle/cycle_bench.py [--seconds 10] [--short 3]
-        [--modes single,multi] [--json bench/results/cycle.json]
+        [--modes virtual,host-single,host-multi] [--json bench/results/cycle.json]
+
+Modes: ``virtual`` (the default: -icount, guest time counts instructions,
+single-threaded TCG; every figure is in guest ns, independent of host
+load), ``host-single`` and ``host-multi`` (guest time on the host clock,
+single- or multi-threaded TCG: figures depend on the host's load).
 
 Boots zynq7000_qemu, starts servod, then rpu_app through remoteproc, and
 runs the exchange for --seconds at 1 ms and --short at 250 us. Prints and
@@ -34,7 +39,12 @@ sys.path.insert(0, str(REPO / "python"))
 
 from servoamp import qemu  # noqa: E402
 
-MODES = {"single": "tcg,thread=single", "multi": None}
+# mode -> (guest clock, QEMU -accel)
+MODES: dict[str, tuple[str, str | None]] = {
+    "virtual": ("virtual", "tcg,thread=single"),
+    "host-single": ("host", "tcg,thread=single"),
+    "host-multi": ("host", None),
+}
 
 
 def stats(console: qemu.Uart, prompt: str) -> dict[str, str]:
@@ -85,9 +95,10 @@ def window(console: qemu.Uart, prompt: str, seconds: float) -> dict[str, object]
     return res
 
 
-def run_mode(board: qemu.Board, images: qemu.Images, accel: str | None, seconds: float, short: float) -> dict[str, object]:
+def run_mode(board: qemu.Board, images: qemu.Images, clock: str, accel: str | None, seconds: float,
+             short: float) -> dict[str, object]:
     prompt = str(board.data["linux"]["prompt"])
-    m = qemu.QemuMachine(board, images, accel=accel)
+    m = qemu.QemuMachine(board, images, accel=accel, clock=clock)
     with m:
         qemu.boot_to_shell(m, timeout=90)
         c = m.uart(0)
@@ -110,7 +121,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--short", type=float, default=3.0)
-    ap.add_argument("--modes", default="single,multi")
+    ap.add_argument("--modes", default="virtual")
     ap.add_argument("--json", type=Path, default=REPO / "bench/results/cycle.json")
     args = ap.parse_args()
     board = qemu.Board.load("zynq7000_qemu")
@@ -123,11 +134,16 @@ def main() -> int:
         "modes": {},
     }
     for mode in args.modes.split(","):
-        r = run_mode(board, images, MODES[mode], args.seconds, args.short)
-        result["modes"][mode] = {"accel": MODES[mode] or "tcg (multi-threaded, default)", **r}  # type: ignore[index]
+        if mode not in MODES:
+            ap.error(f"--modes: {mode!r} is not one of {', '.join(MODES)}")
+        clock, accel = MODES[mode]
+        r = run_mode(board, images, clock, accel, args.seconds, args.short)
+        result["modes"][mode] = {  # type: ignore[index]
+            "clock": " ".join(qemu.clock_args(board, clock)) or "host",
+            "accel": accel or "tcg (multi-threaded, default)", **r}
         for per, w in r.items():
             lin, srv = w["linux"], w["servo"]  # type: ignore[index]
-            print(f"[{mode:6} {per:>6}] linux cycles {lin['cycles']} missed {lin['missed']} ({lin['miss_rate_pct']} %), "
+            print(f"[{mode:11} {per:>6}] linux cycles {lin['cycles']} missed {lin['missed']} ({lin['miss_rate_pct']} %), "
                   f"servo cycles {srv['cycles']} missed {srv['missed']} ({srv['miss_rate_pct']} %), "
                   f"fb torn/invalid {lin['feedback']['torn']}/{lin['feedback']['invalid']}, "
                   f"cmd torn/invalid {srv['commands']['torn']}/{srv['commands']['invalid']}")
