@@ -20,7 +20,17 @@
  * If the firmware does not park in time, CPU1 is reset through the SLCR
  * (A9_CPU_RST_CTRL) when the devicetree gives the SLCR; the boot ROM of a
  * real Zynq-7000 then parks it again on the (zeroed) boot register. QEMU
- * only stores that register: an emulated CPU1 keeps running.
+ * only stores that register (hw/misc/zynq_slcr.c): an emulated CPU1 keeps
+ * running.
+ *
+ * A stop is confirmed only by 'PRKD' in the status word: the firmware's own
+ * answer, late or not. Nothing else can tell the driver that CPU1 no longer
+ * executes from the carveout (neither the boot ROM nor the board's park loop
+ * writes the status word, and reading A9_CPU_RST_CTRL back proves nothing on
+ * QEMU). A stop that cannot be confirmed is an error: the core then keeps
+ * the state "running", and the driver refuses to load any image (including
+ * after a reload of the driver, which finds 'RUN!' still in the status word)
+ * until a new park request is answered.
  *
  * Copyright (C) 2026 The servoamp authors
  */
@@ -37,8 +47,11 @@
 #include <linux/of_address.h>
 #include <linux/of_reserved_mem.h>
 #include <linux/platform_device.h>
+#include <linux/overflow.h>
 #include <linux/regmap.h>
 #include <linux/remoteproc.h>
+#include <linux/rsc_table.h>
+#include <linux/string.h>
 #include <asm/barrier.h>
 
 #include "remoteproc_internal.h"
@@ -63,6 +76,10 @@
 #define ZSR_DEFAULT_START_TIMEOUT_MS	1000
 #define ZSR_DEFAULT_STOP_TIMEOUT_MS	500
 #define ZSR_POLL_US			100
+/* how long 'PRKD' may still take to appear after an SLCR reset */
+#define ZSR_RESET_CONFIRM_MS		50
+/* no servo firmware has more PT_LOAD segments (the overlap check is O(n^2)) */
+#define ZSR_MAX_LOAD_SEGMENTS		32
 #define ZSR_DEFAULT_FIRMWARE		"servoamp-rpu.elf"
 
 /**
@@ -97,6 +114,8 @@ enum {
  * @park_addr: address of the CPU1 park loop
  * @start_timeout_ms: bound on the wait for 'RUN!' after a start
  * @stop_timeout_ms: bound on the wait for 'PRKD' after a stop request
+ * @cpu1_unconfirmed: a stop could not be confirmed: CPU1 may still execute
+ *	a firmware from the carveout, so nothing may be loaded
  */
 struct zynq_servo_rproc {
 	struct device *dev;
@@ -109,6 +128,7 @@ struct zynq_servo_rproc {
 	u32 park_addr;
 	u32 start_timeout_ms;
 	u32 stop_timeout_ms;
+	bool cpu1_unconfirmed;
 };
 
 static bool zsr_overlaps(u64 start, u64 end, const struct zsr_region *r)
@@ -140,46 +160,159 @@ static const char *zsr_ocm_owner(struct zynq_servo_rproc *zsr, u64 start,
 }
 
 /**
- * zsr_sanity_check() - refuse any image the servo core cannot run
- * @rproc: the remote processor handle
- * @fw: the firmware image
+ * zsr_reset_cpu1() - reset CPU1 through the SLCR after a failed stop
+ * @zsr: the servo core
  *
- * Every refusal logs the reason. Checks: ELF magic, ELF32, little-endian,
- * EM_ARM, executable, header tables inside the file, every PT_LOAD segment
- * inside the file and inside the carveout (never in OCM), and the entry
- * point inside the carveout.
+ * On a real Zynq-7000, CPU1 leaves reset in the boot ROM, which waits on the
+ * (already zeroed) boot register: it is parked again. QEMU only stores
+ * A9_CPU_RST_CTRL, so an emulated CPU1 is not affected by this write.
  *
- * Return: 0 if the image can be loaded, -EINVAL otherwise.
+ * Return: 0 when the reset was written, a negative error code when there is
+ * no SLCR or the write failed.
  */
-static int zsr_sanity_check(struct rproc *rproc, const struct firmware *fw)
+static int zsr_reset_cpu1(struct zynq_servo_rproc *zsr)
 {
-	struct zynq_servo_rproc *zsr = rproc->priv;
-	struct device *dev = zsr->dev;
-	const char *name = rproc->firmware;
-	const struct elf32_hdr *ehdr;
-	const struct elf32_phdr *phdr;
-	u64 start, end, off_end;
-	const char *owner;
-	bool entry_ok = false;
-	int i;
+	const u32 mask = ZSR_A9_RST1 | ZSR_A9_CLKSTOP1;
+	int ret;
 
-	if (fw->size < EI_NIDENT || memcmp(fw->data, ELFMAG, SELFMAG)) {
-		dev_err(dev, "%s: not an ELF file (bad magic)\n", name);
-		return -EINVAL;
+	if (!zsr->slcr)
+		return -ENODEV;
+
+	ret = regmap_update_bits(zsr->slcr, ZSR_SLCR_A9_CPU_RST_CTRL, mask,
+				 mask);
+	if (ret)
+		goto err;
+	usleep_range(10, 20);
+	ret = regmap_update_bits(zsr->slcr, ZSR_SLCR_A9_CPU_RST_CTRL,
+				 ZSR_A9_RST1, 0);
+	if (ret)
+		goto err;
+	ret = regmap_update_bits(zsr->slcr, ZSR_SLCR_A9_CPU_RST_CTRL,
+				 ZSR_A9_CLKSTOP1, 0);
+	if (ret)
+		goto err;
+	dev_warn(zsr->dev, "CPU1 reset through SLCR A9_CPU_RST_CTRL\n");
+	return 0;
+
+err:
+	dev_err(zsr->dev, "SLCR write failed: %d\n", ret);
+	return ret;
+}
+
+static int zsr_wait_parked(struct zynq_servo_rproc *zsr, u32 timeout_ms)
+{
+	u32 status;
+
+	return readl_poll_timeout(zsr->ctrl + ZSR_STATUS_OFFSET, status,
+				  status == ZSR_STATUS_PARKED, ZSR_POLL_US,
+				  timeout_ms * USEC_PER_MSEC);
+}
+
+/**
+ * zsr_park() - ask the firmware to return to the park loop and wait for it
+ * @zsr: the servo core
+ *
+ * Return: 0 when the firmware reported 'PRKD', -ETIMEDOUT otherwise.
+ */
+static int zsr_park(struct zynq_servo_rproc *zsr)
+{
+	/* the park loop must find no entry point once the firmware is there */
+	writel(0, zsr->boot);
+	writel(ZSR_CTRL_STOP, zsr->ctrl + ZSR_CTRL_OFFSET);
+	dsb(ishst);
+	sev();
+
+	return zsr_wait_parked(zsr, zsr->stop_timeout_ms);
+}
+
+/**
+ * zsr_halt() - bring CPU1 back to the park loop, or say why it is not known
+ * to be there
+ * @zsr: the servo core
+ *
+ * Asks the firmware to park; when it does not answer in time, resets CPU1
+ * through the SLCR (when described) and reads the status word again: a
+ * firmware that parked late, or a park loop that announces itself, still
+ * confirms the stop. Anything else leaves @zsr->cpu1_unconfirmed set, and
+ * no image is loaded until a later call confirms the park.
+ *
+ * Return: 0 when CPU1 is known parked ('PRKD'), -ETIMEDOUT otherwise.
+ */
+static int zsr_halt(struct zynq_servo_rproc *zsr)
+{
+	u32 status;
+
+	if (!zsr_park(zsr))
+		goto parked;
+
+	status = readl(zsr->ctrl + ZSR_STATUS_OFFSET);
+	dev_err(zsr->dev, "firmware did not park within %u ms (status 0x%08x)%s\n",
+		zsr->stop_timeout_ms, status,
+		zsr->slcr ? ": resetting CPU1" : "");
+	if (!zsr_reset_cpu1(zsr) &&
+	    !zsr_wait_parked(zsr, ZSR_RESET_CONFIRM_MS))
+		goto parked;
+
+	zsr->cpu1_unconfirmed = true;
+	status = readl(zsr->ctrl + ZSR_STATUS_OFFSET);
+	if (zsr->slcr)
+		dev_err(zsr->dev, "CPU1 not confirmed stopped: status 0x%08x, not 'PRKD', %u ms after the SLCR reset (QEMU ignores that reset, and a boot ROM does not write 'PRKD'); the firmware may still run from the carveout: nothing will be loaded until CPU1 parks\n",
+			status, ZSR_RESET_CONFIRM_MS);
+	else
+		dev_err(zsr->dev, "CPU1 not confirmed stopped: status 0x%08x, not 'PRKD', and no SLCR is described to reset CPU1; the firmware may still run from the carveout: nothing will be loaded until CPU1 parks\n",
+			status);
+	return -ETIMEDOUT;
+
+parked:
+	if (zsr->cpu1_unconfirmed)
+		dev_info(zsr->dev, "CPU1 parked: images may be loaded again\n");
+	zsr->cpu1_unconfirmed = false;
+	return 0;
+}
+
+/**
+ * zsr_may_load() - refuse to load while CPU1 is not known to be parked
+ * @zsr: the servo core
+ * @name: the image about to be loaded, for the message
+ * @retry: ask CPU1 to park again first
+ *
+ * Return: 0 when CPU1 is known parked, -EBUSY otherwise.
+ */
+static int zsr_may_load(struct zynq_servo_rproc *zsr, const char *name,
+			bool retry)
+{
+	if (!zsr->cpu1_unconfirmed)
+		return 0;
+	if (retry) {
+		dev_warn(zsr->dev, "%s: a stop of CPU1 was not confirmed: asking it to park again\n",
+			 name);
+		if (!zsr_halt(zsr))
+			return 0;
 	}
-	if (fw->data[EI_CLASS] != ELFCLASS32) {
+	dev_err(zsr->dev, "%s: not loaded: CPU1 is not known to be parked or reset and may still run a firmware from the carveout\n",
+		name);
+	return -EBUSY;
+}
+
+/**
+ * zsr_check_ehdr() - what the core's rproc_elf_sanity_check() leaves open
+ * @zsr: the servo core
+ * @name: the image name, for messages
+ * @fw: an image that passed rproc_elf_sanity_check()
+ *
+ * Return: 0 for an ELF32 ARM executable whose program and section header
+ * tables lie inside the file, -EINVAL otherwise.
+ */
+static int zsr_check_ehdr(struct zynq_servo_rproc *zsr, const char *name,
+			  const struct firmware *fw)
+{
+	const struct elf32_hdr *ehdr = (const struct elf32_hdr *)fw->data;
+	struct device *dev = zsr->dev;
+	u64 off_end;
+
+	if (ehdr->e_ident[EI_CLASS] != ELFCLASS32) {
 		dev_err(dev, "%s: wrong ELF class %u, the Cortex-A9 servo core needs ELF32\n",
-			name, fw->data[EI_CLASS]);
-		return -EINVAL;
-	}
-	if (fw->size < sizeof(*ehdr)) {
-		dev_err(dev, "%s: truncated: %zu bytes, smaller than the ELF header\n",
-			name, fw->size);
-		return -EINVAL;
-	}
-	ehdr = (const struct elf32_hdr *)fw->data;
-	if (ehdr->e_ident[EI_DATA] != ELFDATA2LSB) {
-		dev_err(dev, "%s: not little-endian\n", name);
+			name, ehdr->e_ident[EI_CLASS]);
 		return -EINVAL;
 	}
 	if (ehdr->e_machine != EM_ARM) {
@@ -192,51 +325,83 @@ static int zsr_sanity_check(struct rproc *rproc, const struct firmware *fw)
 			name, ehdr->e_type);
 		return -EINVAL;
 	}
-	if (!ehdr->e_phnum || ehdr->e_phentsize != sizeof(*phdr)) {
-		dev_err(dev, "%s: no program headers, or entry size %u is not %zu\n",
-			name, ehdr->e_phentsize, sizeof(*phdr));
+	if (ehdr->e_phentsize != sizeof(struct elf32_phdr)) {
+		dev_err(dev, "%s: program header entry size %u is not %zu\n",
+			name, ehdr->e_phentsize, sizeof(struct elf32_phdr));
 		return -EINVAL;
 	}
-	off_end = (u64)ehdr->e_phoff + (u64)ehdr->e_phnum * sizeof(*phdr);
+	off_end = (u64)ehdr->e_phoff +
+		  (u64)ehdr->e_phnum * sizeof(struct elf32_phdr);
 	if (off_end > fw->size) {
 		dev_err(dev, "%s: truncated: program headers end at %llu, file has %zu bytes\n",
 			name, off_end, fw->size);
 		return -EINVAL;
 	}
-	if (ehdr->e_shnum) {
-		off_end = (u64)ehdr->e_shoff +
-			  (u64)ehdr->e_shnum * sizeof(struct elf32_shdr);
-		if (ehdr->e_shentsize != sizeof(struct elf32_shdr) ||
-		    ehdr->e_shstrndx >= ehdr->e_shnum) {
-			dev_err(dev, "%s: malformed section header table\n",
-				name);
-			return -EINVAL;
-		}
-		if (off_end > fw->size) {
-			dev_err(dev, "%s: truncated: section headers end at %llu, file has %zu bytes\n",
-				name, off_end, fw->size);
-			return -EINVAL;
-		}
+	if (!ehdr->e_shnum)
+		return 0;
+	if (ehdr->e_shentsize != sizeof(struct elf32_shdr) ||
+	    ehdr->e_shstrndx >= ehdr->e_shnum) {
+		dev_err(dev, "%s: malformed section header table\n", name);
+		return -EINVAL;
+	}
+	off_end = (u64)ehdr->e_shoff +
+		  (u64)ehdr->e_shnum * sizeof(struct elf32_shdr);
+	if (off_end > fw->size) {
+		dev_err(dev, "%s: truncated: section headers end at %llu, file has %zu bytes\n",
+			name, off_end, fw->size);
+		return -EINVAL;
 	}
 
+	return 0;
+}
+
+/**
+ * zsr_check_segments() - every PT_LOAD segment inside the file and the
+ * carveout, never in OCM, no two overlapping, the entry point in one
+ * @zsr: the servo core
+ * @name: the image name, for messages
+ * @fw: an image that passed zsr_check_ehdr()
+ *
+ * rproc_elf_load_segments() loads each segment at its physical address, in
+ * table order: overlapping segments would overwrite each other.
+ *
+ * Return: 0 if the segments can be loaded, -EINVAL otherwise.
+ */
+static int zsr_check_segments(struct zynq_servo_rproc *zsr, const char *name,
+			      const struct firmware *fw)
+{
+	const struct elf32_hdr *ehdr = (const struct elf32_hdr *)fw->data;
+	const struct elf32_phdr *phdr, *prev;
+	struct device *dev = zsr->dev;
+	u64 start, end, off_end;
+	unsigned int loads = 0;
+	bool entry_ok = false;
+	const char *owner;
+	int i, j;
+
 	phdr = (const struct elf32_phdr *)(fw->data + ehdr->e_phoff);
-	for (i = 0; i < ehdr->e_phnum; i++, phdr++) {
-		if (phdr->p_type != PT_LOAD || !phdr->p_memsz)
+	for (i = 0; i < ehdr->e_phnum; i++) {
+		if (phdr[i].p_type != PT_LOAD || !phdr[i].p_memsz)
 			continue;
-		if (phdr->p_filesz > phdr->p_memsz) {
-			dev_err(dev, "%s: segment %d: file size 0x%x larger than memory size 0x%x\n",
-				name, i, phdr->p_filesz, phdr->p_memsz);
+		if (++loads > ZSR_MAX_LOAD_SEGMENTS) {
+			dev_err(dev, "%s: more than %u loadable segments\n",
+				name, ZSR_MAX_LOAD_SEGMENTS);
 			return -EINVAL;
 		}
-		off_end = (u64)phdr->p_offset + phdr->p_filesz;
+		if (phdr[i].p_filesz > phdr[i].p_memsz) {
+			dev_err(dev, "%s: segment %d: file size 0x%x larger than memory size 0x%x\n",
+				name, i, phdr[i].p_filesz, phdr[i].p_memsz);
+			return -EINVAL;
+		}
+		off_end = (u64)phdr[i].p_offset + phdr[i].p_filesz;
 		if (off_end > fw->size) {
 			dev_err(dev, "%s: truncated: segment %d needs bytes up to %llu, file has %zu\n",
 				name, i, off_end, fw->size);
 			return -EINVAL;
 		}
-		/* rproc_elf_load_segments() loads at the physical address */
-		start = phdr->p_paddr;
-		end = start + phdr->p_memsz;
+		/* u64: a 32-bit address plus a 32-bit size cannot wrap */
+		start = phdr[i].p_paddr;
+		end = start + phdr[i].p_memsz;
 		owner = zsr_ocm_owner(zsr, start, end);
 		if (owner) {
 			dev_err(dev, "%s: segment %d [0x%llx-0x%llx) overlaps OCM (%s), which the firmware does not own\n",
@@ -247,6 +412,18 @@ static int zsr_sanity_check(struct rproc *rproc, const struct firmware *fw)
 			dev_err(dev, "%s: segment %d [0x%llx-0x%llx) is outside the carveout [0x%llx-0x%llx)\n",
 				name, i, start, end, zsr->carveout.start,
 				zsr->carveout.end);
+			return -EINVAL;
+		}
+		for (j = 0; j < i; j++) {
+			prev = &phdr[j];
+			if (prev->p_type != PT_LOAD || !prev->p_memsz ||
+			    start >= (u64)prev->p_paddr + prev->p_memsz ||
+			    prev->p_paddr >= end)
+				continue;
+			dev_err(dev, "%s: segments %d [0x%x-0x%llx) and %d [0x%llx-0x%llx) overlap\n",
+				name, j, prev->p_paddr,
+				(u64)prev->p_paddr + prev->p_memsz, i, start,
+				end);
 			return -EINVAL;
 		}
 		if (ehdr->e_entry >= start && ehdr->e_entry < end)
@@ -263,34 +440,263 @@ static int zsr_sanity_check(struct rproc *rproc, const struct firmware *fw)
 }
 
 /**
- * zsr_has_rsc_section() - tell whether the image has a .resource_table
- * @fw: a firmware image that passed zsr_sanity_check()
+ * zsr_check_section_names() - every section name inside the name table
+ * @zsr: the servo core
+ * @name: the image name, for messages
+ * @fw: an image that passed zsr_check_ehdr()
  *
- * Return: true when a section named ".resource_table" exists.
+ * The core's find_table() strcmp()s the name of every section, at the name
+ * table's file offset plus sh_name, with no bound: the name table must lie
+ * inside the file and every name must start, and end with a NUL, inside it.
+ *
+ * Return: 0 if all names are bounded, -EINVAL otherwise.
  */
-static bool zsr_has_rsc_section(const struct firmware *fw)
+static int zsr_check_section_names(struct zynq_servo_rproc *zsr,
+				   const char *name, const struct firmware *fw)
 {
 	const struct elf32_hdr *ehdr = (const struct elf32_hdr *)fw->data;
 	const struct elf32_shdr *shdr, *strtab;
+	struct device *dev = zsr->dev;
 	const char *names;
-	size_t len = sizeof(".resource_table");
+	u64 end;
+	u32 off;
 	int i;
 
 	if (!ehdr->e_shnum)
-		return false;
+		return 0;
 
 	shdr = (const struct elf32_shdr *)(fw->data + ehdr->e_shoff);
 	strtab = &shdr[ehdr->e_shstrndx];
-	if ((u64)strtab->sh_offset + strtab->sh_size > fw->size)
-		return false;
+	end = (u64)strtab->sh_offset + strtab->sh_size;
+	if (end > fw->size) {
+		dev_err(dev, "%s: section name table [0x%x-0x%llx) is outside the file (%zu bytes)\n",
+			name, strtab->sh_offset, end, fw->size);
+		return -EINVAL;
+	}
 	names = (const char *)fw->data + strtab->sh_offset;
 
-	for (i = 0; i < ehdr->e_shnum; i++)
-		if ((u64)shdr[i].sh_name + len <= strtab->sh_size &&
-		    !memcmp(names + shdr[i].sh_name, ".resource_table", len))
-			return true;
+	for (i = 0; i < ehdr->e_shnum; i++) {
+		off = shdr[i].sh_name;
+		if (off >= strtab->sh_size) {
+			dev_err(dev, "%s: section %d: name offset 0x%x is outside the section name table (%u bytes)\n",
+				name, i, off, strtab->sh_size);
+			return -EINVAL;
+		}
+		if (!memchr(names + off, '\0', strtab->sh_size - off)) {
+			dev_err(dev, "%s: section %d: name at offset 0x%x is not NUL-terminated inside the section name table\n",
+				name, i, off);
+			return -EINVAL;
+		}
+	}
 
-	return false;
+	return 0;
+}
+
+/**
+ * zsr_rsc_section() - the section the core takes as the resource table
+ * @fw: an image that passed zsr_check_section_names()
+ *
+ * Return: the first section named ".resource_table", as find_table() picks
+ * it, or NULL.
+ */
+static const struct elf32_shdr *zsr_rsc_section(const struct firmware *fw)
+{
+	const struct elf32_hdr *ehdr = (const struct elf32_hdr *)fw->data;
+	const struct elf32_shdr *shdr;
+	const char *names;
+	int i;
+
+	if (!ehdr->e_shnum)
+		return NULL;
+
+	shdr = (const struct elf32_shdr *)(fw->data + ehdr->e_shoff);
+	names = (const char *)fw->data + shdr[ehdr->e_shstrndx].sh_offset;
+	for (i = 0; i < ehdr->e_shnum; i++)
+		if (!strcmp(names + shdr[i].sh_name, ".resource_table"))
+			return &shdr[i];
+
+	return NULL;
+}
+
+/**
+ * zsr_in_carveout() - whether [@da, @da + @len) lies inside the carveout
+ * @zsr: the servo core
+ * @da: first device address
+ * @len: length in bytes
+ *
+ * In u64, so that a @len near 4 GiB cannot wrap the sum (the core's
+ * rproc_da_to_va() adds them in 32 bits).
+ */
+static bool zsr_in_carveout(const struct zynq_servo_rproc *zsr, u32 da,
+			    u32 len)
+{
+	return da >= zsr->carveout.start &&
+	       (u64)da + len <= zsr->carveout.end;
+}
+
+struct zsr_rsc_check {
+	struct zynq_servo_rproc *zsr;
+	const char *name;
+};
+
+/* rsc_table_for_each_entry() callback: entries checked against the carveout */
+static int zsr_check_rsc_entry(u32 type, void *rsc, int offset, int avail,
+			       void *data)
+{
+	const struct zsr_rsc_check *c = data;
+	struct zynq_servo_rproc *zsr = c->zsr;
+	const struct fw_rsc_carveout *mem = rsc;
+	const struct fw_rsc_trace *trace = rsc;
+
+	switch (type) {
+	case RSC_TRACE:
+		if (avail < (int)sizeof(*trace)) {
+			dev_err(zsr->dev, "%s: trace entry at offset %d is truncated\n",
+				c->name, offset);
+			return -EINVAL;
+		}
+		if (!zsr_in_carveout(zsr, trace->da, trace->len)) {
+			dev_err(zsr->dev, "%s: trace buffer '%.32s' [0x%x +0x%x) is not inside the carveout [0x%llx-0x%llx)\n",
+				c->name, (const char *)trace->name, trace->da,
+				trace->len, zsr->carveout.start,
+				zsr->carveout.end);
+			return -EINVAL;
+		}
+		break;
+	case RSC_CARVEOUT:
+		if (avail < (int)sizeof(*mem)) {
+			dev_err(zsr->dev, "%s: carveout entry at offset %d is truncated\n",
+				c->name, offset);
+			return -EINVAL;
+		}
+		if (mem->da != (u32)FW_RSC_ADDR_ANY &&
+		    !zsr_in_carveout(zsr, mem->da, mem->len)) {
+			dev_err(zsr->dev, "%s: carveout entry '%.32s' [0x%x +0x%x) is not inside the carveout [0x%llx-0x%llx)\n",
+				c->name, (const char *)mem->name, mem->da,
+				mem->len, zsr->carveout.start,
+				zsr->carveout.end);
+			return -EINVAL;
+		}
+		break;
+	}
+
+	return 0;
+}
+
+/**
+ * zsr_check_rsc_table() - the resource table and its entries fit the board
+ * @zsr: the servo core
+ * @name: the image name, for messages
+ * @fw: the image
+ * @sh: its .resource_table section
+ *
+ * The core checks the table's header when it reads it; the driver checks
+ * first that it can walk the table, then that the table is loaded into the
+ * carveout (the core copies it there before the start) and that every
+ * trace buffer and carveout entry lies inside the carveout.
+ *
+ * Return: 0 if the table fits, -EINVAL otherwise.
+ */
+static int zsr_check_rsc_table(struct zynq_servo_rproc *zsr, const char *name,
+			       const struct firmware *fw,
+			       const struct elf32_shdr *sh)
+{
+	struct zsr_rsc_check c = { zsr, name };
+	struct device *dev = zsr->dev;
+	struct resource_table *table;
+	u64 end;
+
+	end = (u64)sh->sh_offset + sh->sh_size;
+	if (end > fw->size) {
+		dev_err(dev, "%s: resource table [0x%x-0x%llx) is outside the file (%zu bytes)\n",
+			name, sh->sh_offset, end, fw->size);
+		return -EINVAL;
+	}
+	if (sh->sh_size < sizeof(*table)) {
+		dev_err(dev, "%s: resource table of %u bytes has no header\n",
+			name, sh->sh_size);
+		return -EINVAL;
+	}
+	/* rsc_table_for_each_entry() only reads through this pointer */
+	table = (struct resource_table *)(fw->data + sh->sh_offset);
+	if (struct_size(table, offset, table->num) > sh->sh_size) {
+		dev_err(dev, "%s: resource table lists %u entries, more than its %u bytes hold\n",
+			name, table->num, sh->sh_size);
+		return -EINVAL;
+	}
+	if (!zsr_in_carveout(zsr, sh->sh_addr, sh->sh_size)) {
+		dev_err(dev, "%s: resource table [0x%x-0x%llx) is outside the carveout [0x%llx-0x%llx)\n",
+			name, sh->sh_addr, (u64)sh->sh_addr + sh->sh_size,
+			zsr->carveout.start, zsr->carveout.end);
+		return -EINVAL;
+	}
+
+	return rsc_table_for_each_entry(table, sh->sh_size, dev,
+					zsr_check_rsc_entry, &c);
+}
+
+/**
+ * zsr_sanity_check() - refuse any image the servo core cannot run
+ * @rproc: the remote processor handle
+ * @fw: the firmware image
+ *
+ * Nothing is loaded while a stop of CPU1 is unconfirmed. Then the core's
+ * rproc_elf_sanity_check() (magic, class, endianness, a first look at the
+ * header tables), then what is specific to this board: ELF32 ARM
+ * executable, header tables inside the file, section names bounded by the
+ * name table, PT_LOAD segments inside the file and the carveout, never in
+ * OCM, not overlapping, the entry point in one of them, and the resource
+ * table (if any) and its entries inside the carveout. Every refusal logs
+ * the reason.
+ *
+ * Return: 0 if the image can be loaded, a negative error code otherwise.
+ */
+static int zsr_sanity_check(struct rproc *rproc, const struct firmware *fw)
+{
+	struct zynq_servo_rproc *zsr = rproc->priv;
+	const char *name = rproc->firmware;
+	const struct elf32_shdr *rsc;
+	int ret;
+
+	ret = zsr_may_load(zsr, name, true);
+	if (ret)
+		return ret;
+
+	ret = rproc_elf_sanity_check(rproc, fw);
+	if (ret) {
+		dev_err(zsr->dev, "%s: refused by the remoteproc core's ELF check\n",
+			name);
+		return ret;
+	}
+
+	ret = zsr_check_ehdr(zsr, name, fw);
+	if (ret)
+		return ret;
+	ret = zsr_check_segments(zsr, name, fw);
+	if (ret)
+		return ret;
+	ret = zsr_check_section_names(zsr, name, fw);
+	if (ret)
+		return ret;
+
+	rsc = zsr_rsc_section(fw);
+	if (rsc)
+		return zsr_check_rsc_table(zsr, name, fw, rsc);
+
+	return 0;
+}
+
+/* the core loads through here: never while CPU1 may still run a firmware */
+static int zsr_load(struct rproc *rproc, const struct firmware *fw)
+{
+	struct zynq_servo_rproc *zsr = rproc->priv;
+	int ret;
+
+	ret = zsr_may_load(zsr, rproc->firmware, false);
+	if (ret)
+		return ret;
+
+	return rproc_elf_load_segments(rproc, fw);
 }
 
 static int zsr_mem_alloc(struct rproc *rproc, struct rproc_mem_entry *mem)
@@ -335,7 +741,7 @@ static int zsr_parse_fw(struct rproc *rproc, const struct firmware *fw)
 	struct rproc_mem_entry *mem;
 	int ret;
 
-	if (zsr_has_rsc_section(fw)) {
+	if (zsr_rsc_section(fw)) {
 		ret = rproc_elf_load_rsc_table(rproc, fw);
 		if (ret) {
 			dev_err(zsr->dev, "%s: invalid resource table\n",
@@ -360,87 +766,18 @@ static int zsr_parse_fw(struct rproc *rproc, const struct firmware *fw)
 }
 
 /**
- * zsr_reset_cpu1() - reset CPU1 through the SLCR after a failed stop
- * @zsr: the servo core
- *
- * On a real Zynq-7000, CPU1 leaves reset in the boot ROM, which waits on the
- * (already zeroed) boot register: it is parked again. QEMU only stores
- * A9_CPU_RST_CTRL, so an emulated CPU1 is not affected by this write.
- */
-static void zsr_reset_cpu1(struct zynq_servo_rproc *zsr)
-{
-	const u32 mask = ZSR_A9_RST1 | ZSR_A9_CLKSTOP1;
-	int ret;
-
-	if (!zsr->slcr) {
-		dev_err(zsr->dev, "no SLCR described: CPU1 cannot be reset\n");
-		return;
-	}
-
-	ret = regmap_update_bits(zsr->slcr, ZSR_SLCR_A9_CPU_RST_CTRL, mask,
-				 mask);
-	if (ret)
-		goto err;
-	usleep_range(10, 20);
-	ret = regmap_update_bits(zsr->slcr, ZSR_SLCR_A9_CPU_RST_CTRL,
-				 ZSR_A9_RST1, 0);
-	if (ret)
-		goto err;
-	ret = regmap_update_bits(zsr->slcr, ZSR_SLCR_A9_CPU_RST_CTRL,
-				 ZSR_A9_CLKSTOP1, 0);
-	if (ret)
-		goto err;
-	dev_warn(zsr->dev, "CPU1 reset through SLCR A9_CPU_RST_CTRL\n");
-	return;
-
-err:
-	dev_err(zsr->dev, "SLCR write failed: %d\n", ret);
-}
-
-/**
- * zsr_park() - ask the firmware to return to the park loop and wait for it
- * @zsr: the servo core
- *
- * Return: 0 when the firmware reported 'PRKD', -ETIMEDOUT otherwise.
- */
-static int zsr_park(struct zynq_servo_rproc *zsr)
-{
-	u32 status;
-
-	/* the park loop must find no entry point once the firmware is there */
-	writel(0, zsr->boot);
-	writel(ZSR_CTRL_STOP, zsr->ctrl + ZSR_CTRL_OFFSET);
-	dsb(ishst);
-	sev();
-
-	return readl_poll_timeout(zsr->ctrl + ZSR_STATUS_OFFSET, status,
-				  status == ZSR_STATUS_PARKED, ZSR_POLL_US,
-				  zsr->stop_timeout_ms * USEC_PER_MSEC);
-}
-
-/**
  * zsr_stop() - cooperative stop of the servo firmware
  * @rproc: the remote processor handle
  *
- * See the comment at the top of this file. A firmware that does not park in
- * time is reset through the SLCR (real hardware only) and the stop still
- * succeeds, so that a new firmware can be started afterwards.
+ * See the comment at the top of this file and zsr_halt(). A stop that cannot
+ * be confirmed fails: the core keeps the state "running", a new "stop" asks
+ * again, and nothing is loaded meanwhile.
  *
- * Return: 0.
+ * Return: 0 when CPU1 is known parked, -ETIMEDOUT otherwise.
  */
 static int zsr_stop(struct rproc *rproc)
 {
-	struct zynq_servo_rproc *zsr = rproc->priv;
-	u32 status;
-
-	if (zsr_park(zsr)) {
-		status = readl(zsr->ctrl + ZSR_STATUS_OFFSET);
-		dev_err(zsr->dev, "firmware did not park within %u ms (status 0x%08x): resetting CPU1\n",
-			zsr->stop_timeout_ms, status);
-		zsr_reset_cpu1(zsr);
-	}
-
-	return 0;
+	return zsr_halt(rproc->priv);
 }
 
 /**
@@ -448,7 +785,7 @@ static int zsr_stop(struct rproc *rproc)
  * @rproc: the remote processor handle
  *
  * Return: 0 when the firmware reported 'RUN!' in time, -ETIMEDOUT
- * otherwise (CPU1 is then asked to park, or reset).
+ * otherwise (CPU1 is then asked to park, or reset; see zsr_halt()).
  */
 static int zsr_start(struct rproc *rproc)
 {
@@ -476,17 +813,13 @@ static int zsr_start(struct rproc *rproc)
 	if (ret) {
 		dev_err(zsr->dev, "firmware at 0x%08x did not report RUN! within %u ms (status 0x%08x)\n",
 			entry, zsr->start_timeout_ms, status);
-		goto err_stop;
+		zsr_halt(zsr);
+		return ret;
 	}
 
 	dev_info(zsr->dev, "CPU1 running firmware at 0x%08x (RUN! after %lld us)\n",
 		 entry, ktime_us_delta(ktime_get(), t0));
 	return 0;
-
-err_stop:
-	if (zsr_park(zsr))
-		zsr_reset_cpu1(zsr);
-	return ret;
 }
 
 static const struct rproc_ops zsr_ops = {
@@ -495,7 +828,7 @@ static const struct rproc_ops zsr_ops = {
 	.parse_fw		= zsr_parse_fw,
 	.sanity_check		= zsr_sanity_check,
 	.get_boot_addr		= rproc_elf_get_boot_addr,
-	.load			= rproc_elf_load_segments,
+	.load			= zsr_load,
 	.find_loaded_rsc_table	= rproc_elf_find_loaded_rsc_table,
 };
 
@@ -643,12 +976,21 @@ static int zsr_probe(struct platform_device *pdev)
 		return ret;
 
 	/*
-	 * CPU1 is parked by the boot stub. Keep it there and make the OCM
-	 * words say "not running" until the first start.
+	 * CPU1 is parked by the boot stub, unless an earlier instance of this
+	 * driver could not stop a firmware: its 'RUN!' is then still in the
+	 * status word. Ask that firmware to park; if it does not, nothing is
+	 * loaded until it does (zsr_halt()), and 'RUN!' stays for the next
+	 * probe to see. Otherwise keep CPU1 parked and make the OCM words say
+	 * "not running" until the first start.
 	 */
+	if (readl(zsr->ctrl + ZSR_STATUS_OFFSET) == ZSR_STATUS_RUNNING) {
+		dev_warn(dev, "status word reads 'RUN!': a firmware may still run on CPU1, asking it to park\n");
+		zsr_halt(zsr);
+	}
 	writel(0, zsr->boot);
 	writel(ZSR_CTRL_STOP, zsr->ctrl + ZSR_CTRL_OFFSET);
-	writel(0, zsr->ctrl + ZSR_STATUS_OFFSET);
+	if (!zsr->cpu1_unconfirmed)
+		writel(0, zsr->ctrl + ZSR_STATUS_OFFSET);
 
 	ret = devm_rproc_add(dev, rproc);
 	if (ret) {

@@ -116,17 +116,39 @@ rpu_app Starts And Stops
     Start Firmware    rpu_app.elf
     Stop Firmware
 
-A Firmware That Ignores STOP Times Out And Linux Goes On
-    [Documentation]    Last test of the suite on purpose: the stop times out
-    ...    after 500 ms, the driver logs it and writes the SLCR CPU1 reset
-    ...    (A9_CPU_RST_CTRL), which QEMU only stores: the emulated CPU1 keeps
-    ...    running this firmware, so nothing is started after it.
+A Firmware That Ignores STOP Cannot Be Stopped And Nothing Is Loaded After It
+    [Documentation]    Last test of the suite on purpose. The park request
+    ...    times out after 500 ms and the driver writes the SLCR CPU1 reset
+    ...    (A9_CPU_RST_CTRL), which QEMU only stores: CPU1 keeps running this
+    ...    firmware (its heartbeat still moves, 'RUN!' stays). The stop is an
+    ...    error that says why, the state stays running; a reloaded driver
+    ...    finds 'RUN!', cannot park the firmware either, and refuses to load
+    ...    anything, with the reason. Linux goes on.
     Start Firmware    test-fw-deaf.elf
-    Execute Shell Command    echo stop > ${RPROC}/state
-    Remoteproc State Should Be    offline
-    Dmesg Should Contain    firmware did not park within 500 ms
+    ${hb}=    Firmware Symbol    test-fw-deaf.elf    heartbeat
+    Execute Shell Command    dmesg -c > /dev/null
+    Execute Shell Command    echo stop > ${RPROC}/state    expected_rc=1
+    Remoteproc State Should Be    running
+    Dmesg Should Contain    firmware did not park within 500 ms (status 0x52554e21): resetting CPU1
     Dmesg Should Contain    CPU1 reset through SLCR A9_CPU_RST_CTRL
+    Dmesg Should Contain    CPU1 not confirmed stopped: status 0x52554e21, not 'PRKD', 50 ms after the SLCR reset
+    Dmesg Should Contain    nothing will be loaded until CPU1 parks
     ${rst}=    Read Word    0xf8000244
     Should Be Equal As Integers    ${rst}    0
+    Heartbeat Should Advance    ${hb}
+    Word Should Be    ${STATUS_WORD}    ${RUNNING}
+    Execute Shell Command    echo stop > ${RPROC}/state    expected_rc=1
+    Remoteproc State Should Be    running
+    Execute Shell Command    rmmod zynq_servo_rproc
+    Execute Shell Command    dmesg -c > /dev/null
+    Execute Shell Command    insmod /lib/modules/zynq_servo_rproc.ko
+    Dmesg Should Contain    status word reads 'RUN!': a firmware may still run on CPU1, asking it to park
+    Dmesg Should Contain    CPU1 not confirmed stopped: status 0x52554e21
+    Remoteproc State Should Be    offline
+    Word Should Be    ${STATUS_WORD}    ${RUNNING}
+    Execute Shell Command    dmesg -c > /dev/null
+    Start Should Be Refused    ${FW_RSC}
+    Dmesg Should Contain    ${FW_RSC}: not loaded: CPU1 is not known to be parked or reset
+    Heartbeat Should Advance    ${hb}
     ${out}=    Execute Shell Command    echo alive
     Should Be Equal    ${out}    alive
