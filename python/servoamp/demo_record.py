@@ -39,7 +39,7 @@ def _say(msg: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m servoamp.demo_record", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seconds", type=float, default=5.0, help="recording length (default 5)")
+    ap.add_argument("--seconds", type=float, default=5.0, help="recording length in host seconds (default 5; on virtual time the guest may run faster)")
     ap.add_argument("--out", type=Path, default=qemu.REPO / "build" / "demo",
                     help="output folder (default build/demo)")
     ap.add_argument("--port", type=int, default=0, help="host port (default: a free one)")
@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         box: dict[str, RecordResult] = {}
         th = threading.Thread(target=lambda: box.update(
             r=record("127.0.0.1", cb.host_port, mcap, args.seconds)))
-        _say(f"recording {args.seconds:g} s into {mcap}")
+        _say(f"recording {args.seconds:g} s (host time) into {mcap}")
         th.start()
         time.sleep(min(1.5, args.seconds / 3))
         _say("ampctl " + cb.ampctl("param set pos_kp 70").strip())
