@@ -185,6 +185,10 @@ def test_path_error_within_bounds(run: dict[str, Any]) -> None:
     # the contour error never exceeds the distance to the commanded point
     assert float(s["motion.path_err.max_um"]) <= float(s["motion.follow_err.max_um"])
     assert float(s["motion.path_err.rms_um"]) <= float(s["motion.follow_err.rms_um"])
+    if qemu.default_clock() == "virtual":
+        # host load cannot cost the guest a cycle: the bounds always apply
+        assert int(s["linux.missed_irq"]) == 0 and int(s["motion.cmd_skips"]) == 0
+        assert _within_model(s)
     if _within_model(s):
         assert int(s["motion.samples"]) > 0.8 * int(st["program.planned_setpoints"])
         assert float(s["motion.path_err.max_um"]) <= PATH_ERR_MAX_UM
