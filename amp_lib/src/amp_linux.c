@@ -73,9 +73,11 @@ int amp_linux_peer(const struct amp_linux *l)
 		return AMP_E_PEER_ABSENT;
 	if (state == AMP_SSTATE_RUNNING || state == AMP_SSTATE_SAFESTOP)
 		return AMP_OK;
-	if (state == AMP_SSTATE_FAULT)
-		return AMP_E_PEER_ERROR;
-	return AMP_E_PEER_ABSENT;
+	if (state == AMP_SSTATE_OFFLINE)
+		return AMP_E_PEER_ABSENT;
+	/* FAULT, or a word that is no state at all: the peer is attached
+	 * to this epoch but not sane */
+	return AMP_E_PEER_ERROR;
 }
 
 int amp_linux_peer_info(const void *base, uint32_t size, struct amp_peer_info *pi)
@@ -179,7 +181,14 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	l->cmd_seq = seq;
 	AMP_PORT_SIGNAL();
 
-	if (peer != AMP_OK) {
+	/* The watchdog watches the heartbeat from the servo's first attach
+	 * in this epoch on, whatever its state and epoch words say since: a
+	 * servo that writes FAULT (or garbage) and hangs is a stall like any
+	 * other. Before that attach nothing is a stall (the servo may not
+	 * have started yet). */
+	if (peer == AMP_OK || peer == AMP_E_PEER_ERROR)
+		l->peer_seen = 1;
+	if (!l->peer_seen) {
 		l->wd.primed = 0;
 		return peer;
 	}
@@ -187,7 +196,9 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		l->servo_attach = RD(&o->servo_line.attach_count);
 		l->wd.primed = 0;	/* a restarted servo gets a fresh watchdog */
 	}
-	return amp_wd_feed(&l->wd, RD(&o->servo_line.heartbeat));
+	if (amp_wd_feed(&l->wd, RD(&o->servo_line.heartbeat)) == AMP_E_STALLED)
+		return AMP_E_STALLED;
+	return peer;
 }
 
 int amp_linux_mbox_post(struct amp_linux *l, const struct amp_msg *req)

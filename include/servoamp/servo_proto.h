@@ -51,6 +51,13 @@ enum sp_debug {
 	/* Undefined instruction in the background loop: the fault handler
 	 * logs, writes 'CRSH' and waits for STOP. */
 	SP_DEBUG_CRASH = 2u,
+	/* The servo line says FAULT (fault SP_FAULT_DEBUG), then the cycle
+	 * hangs as with SP_DEBUG_HANG (a firmware that faults and stops). */
+	SP_DEBUG_FAULT = 3u,
+	/* The next PARAM_GET or PARAM_SET answer carries 0xffffffff as its
+	 * value (outside every parameter's range; NaN for the floats); the
+	 * request itself is served as usual. */
+	SP_DEBUG_BADPARAM = 4u,
 };
 
 /* Application error statuses (struct amp_msg.status), beside amp_lib's
@@ -160,5 +167,6 @@ struct sp_status {
 #define SP_FAULT_LINUX_STALL 0x57440001u	/* "WD" + 1: Linux heartbeat still for wd_limit cycles */
 #define SP_FAULT_LINUX_GONE  0x57440002u	/* Linux closed / re-initialised the region */
 #define SP_FAULT_FOLLOWING   0x57440003u	/* following error over fe_max */
+#define SP_FAULT_DEBUG       0x57440004u	/* state FAULT written on request (SP_DEBUG_FAULT) */
 
 #endif /* SERVOAMP_SERVO_PROTO_H */

@@ -6,7 +6,8 @@
  * amp_linux_cycle() (heartbeat, semaphore, feedback read, commands written,
  * semaphore set), the telemetry record, and the counters (cycle_stats.h):
  * cycles, exchanges, missed interrupts, late cycles, wake-up latency, and a
- * stall of the servo, which the supervisor reports.
+ * stall of the servo or a servo in FAULT (or with a garbled state word) for
+ * wd_limit cycles, which the supervisor reports for recovery.
  */
 #define _GNU_SOURCE
 #include <string.h>
@@ -18,7 +19,8 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 {
 	struct cycle_stats *st = &sd->stats;
 	const struct setpoint_ops *src = setpoint_source(sd);
-	uint32_t n = sd->axes;
+	/* cmd[] has AMP_MAX_AXES (axes is range-checked where it is set) */
+	uint32_t n = sd->axes <= AMP_MAX_AXES ? sd->axes : AMP_MAX_AXES, nfb;
 	struct amp_peer_info pi;
 	struct amp_rx_info rx;
 	uint64_t t_done;
@@ -36,8 +38,10 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 	st->cycles++;
 	for (uint32_t i = 0; i < n && i < AMP_MAX_AXES; i++)
 		st->cmd_pos[i] = cmd[i].target_pos;
+	/* the axes the feedback covers (amp_lib bounds its count) */
+	nfb = sd->amp.fb.n_axes < n ? sd->amp.fb.n_axes : n;
 	if (rc == AMP_OK && fresh)
-		for (uint32_t i = 0; i < n && i < AMP_MAX_AXES; i++)
+		for (uint32_t i = 0; i < nfb; i++)
 			st->act_pos[i] = sd->amp.fb.axis[i].actual_pos;
 	telemetry_cycle(sd, w, rc, &rx, cmd, n);
 	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
@@ -47,8 +51,12 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 		st->absent++;
 	} else if (rc == AMP_E_STALLED) {
 		if (cycle_stats_stall(st, pi.attach_count, w->t_ns))
-			atomic_store(&sd->session.stall_pending, 1);
-	} else if (rc == AMP_OK || rc == AMP_E_PEER_ERROR) {
+			atomic_store(&sd->session.stall_pending, STALL_HEARTBEAT);
+	}
+	/* a servo whose state word says FAULT (or garbage) for wd_limit
+	 * cycles: recovered like a stall */
+	if (cycle_stats_peer_error(st, rc, sd->amp.wd.limit, pi.attach_count, w->t_ns))
+		atomic_store(&sd->session.stall_pending, STALL_PEER_ERROR); else if (rc == AMP_OK || rc == AMP_E_PEER_ERROR) {
 		if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED)
 			st->exchanges++;
 		st->servo_cycle = sd->amp.fb.cycle;

@@ -35,7 +35,7 @@ void cycle_stats_wake(struct cycle_stats *s, const struct cycle_wake *w, uint32_
 	s->have_count = 1;
 	/* missed interval events: between the events' own times (wake-up
 	 * minus the latency read from the counter), not between wake-ups */
-	if (s->last_event_ns) {
+	if (s->last_event_ns && period_ns) {
 		uint64_t n = (event - s->last_event_ns + period_ns / 2u) / period_ns;
 
 		if (n > 1u)
@@ -81,6 +81,20 @@ int cycle_stats_stall(struct cycle_stats *s, uint32_t attach_count, uint64_t t_n
 	s->stall_us = (uint32_t)((t_ns - s->last_hb_ns) / 1000u);
 	s->stall_cycle = s->cycles;
 	return 1;
+}
+
+int cycle_stats_peer_error(struct cycle_stats *s, int rc, uint32_t limit, uint32_t attach_count, uint64_t t_ns)
+{
+	if (rc != AMP_E_PEER_ERROR) {
+		s->peer_err_run = 0;
+		return 0;
+	}
+	s->peer_errors++;
+	if (s->peer_err_run < UINT32_MAX)
+		s->peer_err_run++;
+	if (s->peer_err_run < (limit ? limit : 1u))
+		return 0;
+	return cycle_stats_stall(s, attach_count, t_ns);
 }
 
 void cycle_stats_new_session(struct cycle_stats *s)

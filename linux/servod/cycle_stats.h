@@ -30,7 +30,8 @@ struct cycle_stats {
 	uint64_t missed_irq;	/* cycle interrupts never seen (time gaps) */
 	uint64_t uio_skips;	/* UIO event count jumped by more than 1 */
 	uint64_t late;		/* commands published after T/2 (the servo reads them then) */
-	uint64_t stalls;	/* AMP_E_STALLED episodes reported */
+	uint64_t stalls;	/* AMP_E_STALLED episodes (and lasting peer errors) reported */
+	uint64_t peer_errors;	/* cycles with AMP_E_PEER_ERROR (servo state FAULT or garbage) */
 	uint64_t stall_cycle;	/* cycles at which the last stall was detected */
 	uint64_t recoveries;	/* crashes reported to remoteproc (supervisor) */
 	uint64_t restores;	/* parameter sets loaded at an attach (supervisor) */
@@ -56,6 +57,7 @@ struct cycle_stats {
 	uint32_t last_hb;	/* the servo's heartbeat, when it last changed, at which cycle */
 	uint64_t last_hb_ns, last_hb_cycle;
 	uint32_t stall_attach;	/* attach_count whose stall was reported (UINT32_MAX: none) */
+	uint32_t peer_err_run;	/* consecutive cycles with AMP_E_PEER_ERROR */
 };
 
 /* The published counters, in the order of their telemetry names. */
@@ -72,6 +74,12 @@ void cycle_stats_heartbeat(struct cycle_stats *s, uint32_t hb, uint64_t t_ns);
 void cycle_stats_work(struct cycle_stats *s, uint32_t lat_ns, uint32_t work_ns, uint32_t period_ns);
 /* A stall of the servo attached as attach_count, detected at t_ns: 1 if new. */
 int cycle_stats_stall(struct cycle_stats *s, uint32_t attach_count, uint64_t t_ns);
+/*
+ * The result rc of a cycle: a servo whose state word says FAULT (or is no
+ * state at all) for limit consecutive cycles is reported like a stall
+ * (recovery): 1 once per attach, when it is; counts the peer-error cycles.
+ */
+int cycle_stats_peer_error(struct cycle_stats *s, int rc, uint32_t limit, uint32_t attach_count, uint64_t t_ns);
 /* A new session: the next stall is reported whatever the attach count. */
 void cycle_stats_new_session(struct cycle_stats *s);
 

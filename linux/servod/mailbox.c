@@ -145,7 +145,8 @@ static int req_resume(struct servod *sd, struct out *o, int argc, char **argv, c
 }
 SERVOD_REQUEST("resume", req_resume);
 
-/* "debug hang|crash": the servo hangs or crashes on purpose (recovery tests). */
+/* "debug hang|crash|fault|badparam": the servo hangs, crashes, faults and
+ * hangs, or gives one out-of-range parameter answer, on purpose (tests). */
 static int req_debug(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
 {
 	uint32_t w;
@@ -154,8 +155,12 @@ static int req_debug(struct servod *sd, struct out *o, int argc, char **argv, ch
 		w = SP_DEBUG_HANG;
 	else if (argc == 2 && !strcmp(argv[1], "crash"))
 		w = SP_DEBUG_CRASH;
+	else if (argc == 2 && !strcmp(argv[1], "fault"))
+		w = SP_DEBUG_FAULT;
+	else if (argc == 2 && !strcmp(argv[1], "badparam"))
+		w = SP_DEBUG_BADPARAM;
 	else {
-		snprintf(msg, n, "usage: debug hang|crash");
+		snprintf(msg, n, "usage: debug hang|crash|fault|badparam");
 		return SE_USAGE;
 	}
 	return simple_command(sd, o, argv[0], SP_CMD_DEBUG, w, 4, msg, n);

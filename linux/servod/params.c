@@ -73,6 +73,21 @@ static void fmt_num(const struct sp_param_desc *d, double v, char *buf, size_t n
 		snprintf(buf, n, "%.0f", v);
 }
 
+/* Is w a value of d's type within its documented range? (NaN and the
+ * infinities are not.) */
+static int value_in_range(const struct sp_param_desc *d, uint32_t w)
+{
+	double v;
+
+	if (d->type == SP_T_F32) {
+		float f = f_of(w);
+
+		return !isnan(f) && f >= (float)d->min && f <= (float)d->max;
+	}
+	v = d->type == SP_T_I32 ? (double)(int32_t)w : (double)w;
+	return v >= d->min && v <= d->max;
+}
+
 /* Parse and range-check a value: SE_OK and *w, or SE_VALUE with a message. */
 static int parse_value(const struct servod *sd, const struct sp_param_desc *d, const char *s, uint32_t *w,
 		       char *msg, size_t n)
@@ -210,7 +225,7 @@ static int params_save(const struct servod *sd)
 
 int params_restore(struct servod *sd, char *msg, size_t n)
 {
-	uint32_t req[1 + 2 * SP_P_COUNT], resp[4], cnt = 0, len;
+	uint32_t req[1 + 2 * SP_P_COUNT], resp[4] = { 0 }, cnt = 0, len = 0;
 	int32_t status;
 	int rc;
 
@@ -226,6 +241,11 @@ int params_restore(struct servod *sd, char *msg, size_t n)
 			  msg, n);
 	if (rc == SE_OK && status) {
 		snprintf(msg, n, "servo refused the parameter set: %s", sp_strerror(status));
+		rc = SE_SERVO;
+	} else if (rc == SE_OK && (len != 4 || resp[0] != cnt)) {
+		/* the answer is {n}: checked like input from the network */
+		snprintf(msg, n, "servo answered the parameter set of %u with %u byte(s)%s%u: refused", cnt, len,
+			 len >= 4 ? ", count " : "", len >= 4 ? resp[0] : 0u);
 		rc = SE_SERVO;
 	}
 	return rc;
@@ -281,18 +301,58 @@ static void put_value(struct out *o, const struct sp_param_desc *d, uint32_t w)
 	put(o, "%s=%s%s%s\n", d->name, v, *d->unit ? " " : "", d->unit);
 }
 
+/*
+ * The servo's answer {id, value} to "param get|set" of id, checked like
+ * input from the network before anything uses it: its length, the id
+ * asked for, a value of the parameter's type within its documented range
+ * (a read-only one: the value servod knows). SE_OK, or SE_SERVO with the
+ * reason in msg and in servod's log; the value then becomes nothing of
+ * servod's (not its set, its file, its period, watchdog or axis count).
+ */
+static int check_answer(struct servod *sd, const char *op, int id, uint32_t len, const uint32_t *resp, char *msg,
+			size_t n)
+{
+	const struct sp_param_desc *d = &param_desc[id];
+	char v[48], lo[32], hi[32], have[48];
+
+	if (len != 8) {
+		snprintf(msg, n, "%s %s: the servo answered %u byte(s), expected 8: refused", op, d->name, len);
+	} else if (resp[0] != (uint32_t)id) {
+		snprintf(msg, n, "%s %s: the servo answered for parameter id %u: refused", op, d->name, resp[0]);
+	} else if (!value_in_range(d, resp[1])) {
+		fmt_value(d, resp[1], v, sizeof(v));
+		fmt_num(d, d->min, lo, sizeof(lo));
+		fmt_num(d, d->max, hi, sizeof(hi));
+		snprintf(msg, n, "%s %s: the servo answered %s (0x%08x), outside the range [%s, %s]%s%s: refused", op,
+			 d->name, v, resp[1], lo, hi, *d->unit ? " " : "", d->unit);
+	} else if ((d->flags & SP_F_RO) && resp[1] != sd->pset[id]) {
+		fmt_value(d, resp[1], v, sizeof(v));
+		fmt_value(d, sd->pset[id], have, sizeof(have));
+		snprintf(msg, n, "%s %s: the servo answered %s for a read-only parameter that is %s: refused", op,
+			 d->name, v, have);
+	} else {
+		return SE_OK;
+	}
+	fmt_value(d, sd->pset[id], have, sizeof(have));
+	logw(sd, "%s (servod keeps %s=%s)", msg, d->name, have);
+	return SE_SERVO;
+}
+
 static int param_get(struct servod *sd, struct out *o, int id, char *msg, size_t n)
 {
-	uint32_t req[1] = { (uint32_t)id }, resp[2], len;
+	uint32_t req[1] = { (uint32_t)id }, resp[2] = { 0, 0 }, len = 0;
 	int32_t status;
 	int rc = mbox_request(sd, SP_CMD_PARAM_GET, req, 4, resp, sizeof(resp), &len, &status, msg, n);
 
 	if (rc)
 		return rc;
-	if (status || len != 8 || resp[0] != (uint32_t)id) {
+	if (status) {
 		snprintf(msg, n, "%s: %s", param_desc[id].name, sp_strerror(status));
 		return SE_SERVO;
 	}
+	rc = check_answer(sd, "get", id, len, resp, msg, n);
+	if (rc)
+		return rc;
 	put_value(o, &param_desc[id], resp[1]);
 	return SE_OK;
 }
@@ -300,7 +360,7 @@ static int param_get(struct servod *sd, struct out *o, int id, char *msg, size_t
 static int param_set(struct servod *sd, struct out *o, int id, const char *value, char *msg, size_t n)
 {
 	const struct sp_param_desc *d = &param_desc[id];
-	uint32_t req[2], resp[2], len, w;
+	uint32_t req[2], resp[2] = { 0, 0 }, len = 0, w;
 	int32_t status;
 	int rc = parse_value(sd, d, value, &w, msg, n);
 
@@ -315,6 +375,9 @@ static int param_set(struct servod *sd, struct out *o, int id, const char *value
 		snprintf(msg, n, "%s: %s", d->name, sp_strerror(status));
 		return status == SP_E_RANGE || status == SP_E_READONLY ? SE_VALUE : SE_SERVO;
 	}
+	rc = check_answer(sd, "set", id, len, resp, msg, n);
+	if (rc)
+		return rc;
 	if (d->flags & SP_F_RESTORE) {
 		uint32_t old = sd->pset[id];
 

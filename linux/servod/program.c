@@ -167,7 +167,11 @@ static int next_mode(struct prog_runner *pr, const struct amp_cmd_axis *cmd, uin
 void prog_cycle(struct prog_runner *pr, struct amp_cmd_axis *cmd, uint32_t n, uint32_t seq)
 {
 	struct prog_playback *p = &pr->play;
-	int m = next_mode(pr, cmd, n, seq);
+	int m;
+
+	if (n > AMP_MAX_AXES)	/* hold_pos[] has AMP_MAX_AXES */
+		n = AMP_MAX_AXES;
+	m = next_mode(pr, cmd, n, seq);
 
 	if (m == PM_SINE)
 		return;	/* the sine stays (the hold was withdrawn) */
@@ -189,7 +193,7 @@ void prog_cycle(struct prog_runner *pr, struct amp_cmd_axis *cmd, uint32_t n, ui
 	path_error_command(&p->pe, seq, p->line, cmd, n);
 }
 
-/* The servo cannot follow (why: 1 link lost, 2 safe stop): a running
+/* The servo cannot follow (why: 1 link lost, 2 safe stop, 3 servo fault): a running
  * program ends in fault and the hold position is resynchronised from the
  * next fresh feedback. */
 static void lose_servo(struct prog_runner *pr, int m, int why)
@@ -208,27 +212,33 @@ void prog_feedback(struct prog_runner *pr, int rc, const struct amp_fb_record *f
 {
 	struct prog_playback *p = &pr->play;
 	int m = atomic_load_explicit(&pr->mode, memory_order_relaxed);
+	uint32_t nfb;
 
 	if (rc != AMP_OK) {
-		/* servo gone, stalled or restarting: a running program ends
-		 * and the next feedback resynchronises the hold position */
-		if (rc != AMP_E_PEER_ERROR)
-			lose_servo(pr, m, 1);
+		/* servo gone, stalled, restarting, or its state word says
+		 * FAULT (or nothing sane): a running program ends, the axes
+		 * are disabled and the next sane feedback resynchronises the
+		 * hold position */
+		lose_servo(pr, m, rc == AMP_E_PEER_ERROR ? 3 : 1);
 		return;
 	}
 	if (!fresh)
 		return;
-	if (n && (fb->axis[0].status_word & SP_AX_SAFESTOP)) {
+	if (n > AMP_MAX_AXES)
+		n = AMP_MAX_AXES;
+	/* the axes the record covers (amp_lib bounds its count) */
+	nfb = fb->n_axes < n ? fb->n_axes : n;
+	if (nfb && (fb->axis[0].status_word & SP_AX_SAFESTOP)) {
 		lose_servo(pr, m, 2);
 		return;
 	}
-	if (p->resync) {
-		for (uint32_t i = 0; i < n && i < AMP_MAX_AXES; i++)
+	if (p->resync && nfb == n) {	/* a hold position for every axis driven */
+		for (uint32_t i = 0; i < n; i++)
 			p->hold_pos[i] = fb->axis[i].actual_pos;
 		p->have_hold = 1;
 		p->resync = 0;
 	}
-	path_error_feedback(&p->pe, fb, n);
+	path_error_feedback(&p->pe, fb, nfb);
 }
 
 /* ---- control thread -------------------------------------------------------------- */
@@ -417,7 +427,8 @@ void prog_format_status(struct prog_runner *pr, struct out *o, const int32_t *cm
 		if (in->error[0])
 			put(o, "program.error=%s\n", in->error);
 		else if (s.link_lost)
-			put(o, "program.error=%s\n", s.link_lost == 1 ? "servo link lost" : "servo in safe stop");
+			put(o, "program.error=%s\n", s.link_lost == 1 ? "servo link lost" :
+			    s.link_lost == 3 ? "servo fault" : "servo in safe stop");
 	}
 	pthread_mutex_unlock(&pr->info_lock);
 	put(o, "program.cmd_inc=%d,%d,%d\nprogram.act_inc=%d,%d,%d\n", cmd[0], cmd[1], cmd[2], act[0], act[1],

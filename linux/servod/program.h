@@ -87,7 +87,7 @@ struct prog_runner {
 	_Atomic int mode;		/* enum prog_mode */
 	_Atomic int result;		/* enum prog_result */
 	atomic_int req_hold, req_stop, feeder_done, feeder_abort;
-	atomic_int link_lost;		/* why a run ended: 1 link lost, 2 safe stop */
+	atomic_int link_lost;		/* why a run ended: 1 link lost, 2 safe stop, 3 servo fault */
 	struct prog_playback play;
 	struct setpoint_queue queue;
 	pthread_mutex_t info_lock;

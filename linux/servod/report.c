@@ -82,6 +82,7 @@ static void put_linux(struct out *o, const struct cycle_stats *c, const struct a
 	put(o, "linux.uio_skips=%llu\n", (unsigned long long)c->uio_skips);
 	put(o, "linux.late=%llu\n", (unsigned long long)c->late);
 	put(o, "linux.stalls=%llu\n", (unsigned long long)c->stalls);
+	put(o, "linux.peer_errors=%llu\n", (unsigned long long)c->peer_errors);
 	put(o, "linux.last_stall_cycles=%u\nlinux.last_stall_us=%u\n", c->stall_cycles, c->stall_us);
 	put(o, "linux.recoveries=%llu\n", (unsigned long long)c->recoveries);
 	put(o, "linux.restores=%llu\n", (unsigned long long)c->restores);

@@ -38,13 +38,19 @@ enum session_event {
 
 #define RECOVERY_TIMEOUT_S 20
 
+/* What the cycle thread saw (session.stall_pending): 0 nothing. */
+enum stall_why {
+	STALL_HEARTBEAT = 1,	/* AMP_E_STALLED: heartbeat still for wd_limit cycles */
+	STALL_PEER_ERROR = 2,	/* AMP_E_PEER_ERROR (FAULT or garbage state) for wd_limit cycles */
+};
+
 struct session {
 	enum session_state state;	/* written under sd->lock by the main thread */
 	uint32_t epoch;			/* of the region servod initialised */
 	uint32_t restored_attach;	/* attach_count whose parameters were loaded */
 	struct timespec recover_t0;	/* when the crash was reported */
 	int waiting_logged;		/* CLOSED: "waiting until it is offline" said once */
-	atomic_int stall_pending;	/* the cycle thread saw a stall: report it */
+	atomic_int stall_pending;	/* the cycle thread saw a stall: report it (enum stall_why) */
 };
 
 /* The state after ev in state s (unchanged when ev does not apply). */

@@ -50,14 +50,22 @@ static void event_locked(struct servod *sd, enum session_event ev)
 	pthread_mutex_unlock(&sd->lock);
 }
 
-/* The cycle thread saw the servo's heartbeat stand still: remoteproc's
+/* The cycle thread saw the servo's heartbeat stand still, or its state
+ * word say FAULT (or nothing sane) for wd_limit cycles: remoteproc's
  * recovery stops and restarts the firmware, which re-attaches. */
-static void report_stall(struct servod *sd)
+static void report_stall(struct servod *sd, int why)
 {
+	struct amp_peer_info pi = { 0 };
 	char path[600];
 
-	logw(sd, "servo stalled (heartbeat still for %u cycles): reporting a crash to remoteproc",
-	     sd->pset[SP_P_wd_limit]);
+	if (why == STALL_PEER_ERROR) {
+		(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
+		logw(sd, "servo faulted (state word 0x%08x, fault 0x%08x) for %u cycles: reporting a crash to remoteproc",
+		     pi.state, pi.fault, sd->pset[SP_P_wd_limit]);
+	} else {
+		logw(sd, "servo stalled (heartbeat still for %u cycles): reporting a crash to remoteproc",
+		     sd->pset[SP_P_wd_limit]);
+	}
 	if (rproc_report_crash(&sd->rproc, path, sizeof(path))) {
 		logm(sd, "%s: %s", path, strerror(errno));
 		return;
@@ -105,7 +113,7 @@ void supervise(struct servod *sd)
 	struct session *ss = &sd->session;
 	const char *rs = rproc_state(&sd->rproc);
 	struct amp_peer_info pi;
-	int peer;
+	int peer, why;
 
 	if (!session_open(ss)) {
 		open_session(sd, rs);
@@ -127,8 +135,9 @@ void supervise(struct servod *sd)
 		logm(sd, "servo went offline");
 		return;
 	}
-	if (atomic_exchange(&ss->stall_pending, 0))
-		report_stall(sd);
+	why = atomic_exchange(&ss->stall_pending, 0);
+	if (why)
+		report_stall(sd, why);
 	pthread_mutex_lock(&sd->lock);
 	peer = amp_linux_peer(&sd->amp);
 	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);

@@ -81,6 +81,7 @@ void telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, cons
 		     const struct amp_cmd_axis *cmd, uint32_t n)
 {
 	const struct amp_fb_record *fb = &sd->amp.fb;
+	uint32_t nfb = fb->n_axes < n ? fb->n_axes : n;	/* the axes the feedback covers */
 	struct telem_cycle tr;
 
 	if (!sd->telem_on)
@@ -98,7 +99,8 @@ void telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, cons
 	tr.result = rc;
 	tr.n_axes = n;
 	memcpy(tr.cmd, cmd, n * sizeof(cmd[0]));
-	memcpy(tr.fb, fb->axis, n * sizeof(tr.fb[0]));
+	memcpy(tr.fb, fb->axis, nfb * sizeof(tr.fb[0]));
+	memset(tr.fb + nfb, 0, (n - nfb) * sizeof(tr.fb[0]));
 	telem_push_cycle(&sd->telem, &tr);
 }
 

@@ -84,7 +84,7 @@ const char *link_backend(void)
 
 static struct amp_servo amp;
 static volatile int attached;
-static volatile uint32_t local_hb, hang, crash_req, linux_cycle;
+static volatile uint32_t local_hb, hang, crash_req, linux_cycle, bad_answer, fault_req;
 static uint32_t next_try;
 static int last_err;
 static struct amp_fb_axis fb[AMP_MAX_AXES];
@@ -103,7 +103,7 @@ volatile struct link_diag link_diag;
 void link_init(void)
 {
 	attached = 0;
-	local_hb = hang = crash_req = linux_cycle = 0;
+	local_hb = hang = crash_req = linux_cycle = bad_answer = fault_req = 0;
 	next_try = 0;
 	last_err = 1;	/* nothing reported yet */
 	amp = (struct amp_servo){ 0 };
@@ -216,6 +216,10 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 			return SP_E_ID;
 		out[0] = id;
 		out[1] = app_param(id);
+		if (bad_answer) {	/* debug: an answer servod must refuse */
+			bad_answer = 0;
+			out[1] = 0xffffffffu;
+		}
 		*len = 8;
 		return SP_OK;
 	}
@@ -235,6 +239,10 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 			amp.wd.limit = v;
 		out[0] = id;
 		out[1] = app_param(id);
+		if (bad_answer) {	/* debug: an answer servod must refuse */
+			bad_answer = 0;
+			out[1] = 0xffffffffu;
+		}
 		*len = 8;
 		return SP_OK;
 	}
@@ -325,6 +333,12 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		} else if (what == SP_DEBUG_CRASH) {
 			log_printf("debug: crash requested: undefined instruction in the background loop\n");
 			crash_req = 1;
+		} else if (what == SP_DEBUG_FAULT) {
+			log_printf("debug: fault requested: servo line FAULT, then cycle work and heartbeat stop\n");
+			fault_req = 1;	/* after the answer (link_poll) */
+		} else if (what == SP_DEBUG_BADPARAM) {
+			log_printf("debug: the next parameter answer carries an out-of-range value\n");
+			bad_answer = 1;
 		} else {
 			return SP_E_RANGE;
 		}
@@ -354,6 +368,12 @@ void link_poll(uint32_t cycle, const struct link_stats *ls)
 			int32_t st = serve(&req, out, &len, ls);
 
 			(void)amp_servo_mbox_respond(&amp, st, out, len);
+		}
+		if (fault_req) {
+			fault_req = 0;
+			hang = 1;	/* first: the cycle handler no longer writes the line */
+			compiler_barrier();
+			amp_servo_set_state(&amp, AMP_SSTATE_FAULT, SP_FAULT_DEBUG);
 		}
 		return;
 	}

@@ -635,6 +635,92 @@ static void test_mbox_cancel(void)
 	CHECK_EQ(L.st.mbox_err, 1);
 }
 
+/*
+ * Issue 13, item 3: the Linux watchdog watches the servo's heartbeat
+ * whatever its state word says, once the servo has attached in this
+ * epoch. A servo that writes FAULT (or garbage, or OFFLINE, or corrupts
+ * its epoch word) and then hangs is AMP_E_STALLED after wd_limit cycles,
+ * like any other hang; a faulted or garbled servo that still beats is
+ * AMP_E_PEER_ERROR; before the first attach nothing is a stall.
+ */
+static int cycles_until_stalled(int max, int *first_rc)
+{
+	struct amp_cmd_axis a[1];
+	struct amp_rx_info rx;
+	int n, rc = AMP_OK;
+
+	fill_cmd(a, 1, 0);
+	for (n = 1; n <= max; n++) {
+		rc = amp_linux_cycle(&L, a, 1, 0, &rx);
+		if (n == 1 && first_rc)
+			*first_rc = rc;
+		if (rc == AMP_E_STALLED)
+			return n;
+	}
+	return -1;
+}
+
+static void beat_once(void)
+{
+	struct amp_fb_axis f[1];
+	struct amp_rx_info rx;
+
+	memset(f, 0, sizeof(f));
+	(void)amp_servo_cycle_rx(&S, 0, &rx);
+	CHECK_EQ(amp_servo_cycle_tx(&S, f, 1, 0, 0), AMP_OK);
+}
+
+static void test_watchdog_any_peer_state(void)
+{
+	static const uint32_t states[] = { AMP_SSTATE_FAULT, 0xdeadbeefu, AMP_SSTATE_OFFLINE };
+	struct amp_cmd_axis a[1];
+	struct amp_rx_info rx;
+	int first;
+
+	fill_cmd(a, 1, 0);
+	/* before the servo ever attached: absent, never a stall */
+	memset(ocm_buf, 0, sizeof(ocm_buf));
+	CHECK_EQ(amp_linux_init(&L, ocm_buf, sizeof(ocm_buf), 4), AMP_OK);
+	CHECK_EQ(cycles_until_stalled(100, &first), -1);
+	CHECK_EQ(first, AMP_E_PEER_ABSENT);
+
+	for (size_t k = 0; k < sizeof(states) / sizeof(states[0]); k++) {
+		fresh_pair(4);
+		beat_once();
+		CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+		/* the servo writes the state word and hangs: the 4th (wd_limit)
+		 * Linux cycle after the one that saw its last beat detects it */
+		OCM->servo_line.state = states[k];
+		CHECK_EQ(cycles_until_stalled(10, &first), 4);
+		CHECK_EQ(first, states[k] == AMP_SSTATE_OFFLINE ? AMP_E_PEER_ABSENT : AMP_E_PEER_ERROR);
+		/* stays detected until the servo comes back */
+		CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_E_STALLED);
+		/* recovery: the restarted servo attaches again (same epoch) */
+		CHECK_EQ(amp_servo_attach(&S, ocm_buf, sizeof(ocm_buf)), AMP_OK);
+		beat_once();
+		CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+		CHECK_EQ(cycles_until_stalled(3, 0), -1);	/* re-primed */
+	}
+
+	/* a garbled state word while the servo still beats: a peer error
+	 * (not "absent"), never a stall */
+	fresh_pair(4);
+	OCM->servo_line.state = 0x12345678u;
+	for (int n = 0; n < 20; n++) {
+		amp_servo_heartbeat(&S);
+		CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_E_PEER_ERROR);
+	}
+	CHECK_EQ(amp_linux_peer(&L), AMP_E_PEER_ERROR);
+
+	/* the servo's epoch word corrupted, then the servo hangs */
+	fresh_pair(4);
+	beat_once();
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+	OCM->servo_line.epoch ^= 0x5a5a0000u;
+	CHECK_EQ(cycles_until_stalled(10, &first), 4);
+	CHECK_EQ(first, AMP_E_PEER_ABSENT);
+}
+
 static void test_layout_constants(void)
 {
 	/* the documented layout (docs/amp-protocol.md), default config */
@@ -665,6 +751,7 @@ int main(void)
 	test_peer_info();
 	test_wd_limit();
 	test_mbox_cancel();
+	test_watchdog_any_peer_state();
 	test_layout_constants();
 	return check_summary("amp_lib unit");
 }

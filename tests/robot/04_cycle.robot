@@ -4,9 +4,10 @@ Documentation     The cycle end to end on the emulated board, in ONE boot:
 ...               counters (one interrupt per core per cycle), the periodic
 ...               exchange at 1 kHz and 250 us, the parameter service
 ...               (round trip of every parameter, error answers), stop/start
-...               through sysfs while servod runs, firmware hang and crash
-...               detected by servod and recovered by remoteproc with the
-...               parameters restored, servod killed -> safe stop reported by
+...               through sysfs while servod runs, firmware hang, crash and
+...               FAULT-then-hang detected by servod and recovered by remoteproc with the
+...               parameters restored, out-of-range parameter answers refused,
+...               servod killed -> safe stop reported by
 ...               the servo. On virtual time (-icount, the default) no cycle
 ...               may be missed on either side and both sides count the same
 ...               cycles; on the host clock (SERVOAMP_CLOCK=host) misses are
@@ -63,6 +64,12 @@ Wait For Servod Log
         ${log}=    Execute Shell Command    cat ${LOG}
         Fail    servod log has ${n} x '${text}', expected ${count}:\n${log}
     END
+
+Servod Log Count
+    [Arguments]    ${text}
+    ${out}=    Execute Shell Command    grep -c "${text}" ${LOG}    expected_rc=any
+    ${n}=    Convert To Integer    ${out}
+    RETURN    ${n}
 
 Ampctl
     [Arguments]    ${args}    ${expected_rc}=0
@@ -362,6 +369,61 @@ Timeout Is Reported When The Servo Does Not Answer
     # restored; on a loaded host the first answer may miss ampctl's 200 ms
     Wait Until Keyword Succeeds    10x    0.3 s    Param Should Be    wd_limit    1000
     Wait Until Keyword Succeeds    10x    0.3 s    Ampctl    param set wd_limit ${K}
+
+Out-Of-Range Parameter Answers Are Refused
+    [Documentation]    Issue 13, item 1: the firmware answers a parameter
+    ...    get and a set with 0xffffffff (outside every range); servod
+    ...    refuses both (exit 7, the reason, a log line) and takes nothing
+    ...    of it: its axis count, set and exchange are unchanged.
+    Param Should Be    axes    3
+    ${n}=    Servod Log Count    servod keeps axes=3
+    Ampctl    debug badparam
+    ${out}=    Ampctl    param get axes    expected_rc=7
+    Should Contain    ${out}    outside the range [1, 8]
+    Ampctl    debug badparam
+    ${out}=    Ampctl    param set axes 3    expected_rc=7
+    Should Contain    ${out}    outside the range [1, 8]
+    Wait For Servod Log    servod keeps axes=3    ${n + 2}
+    Param Should Be    axes    3
+    ${st}=    Ampctl    status
+    Should Contain    ${st}    axes=3
+    ${r}=    Exchange Window    1
+    Exchange Should Run    ${r}
+
+Faulted Then Hung Firmware Is Detected And Recovered
+    [Documentation]    Issue 13, item 3: the firmware writes FAULT into its
+    ...    servo line, then hangs. servod's watchdog keeps watching whatever
+    ...    the state word says: the stall is detected within wd_limit
+    ...    cycles, reported, recovered by remoteproc, parameters restored,
+    ...    servod never restarted.
+    Ampctl    param set wd_limit 10
+    ${pid}=    Execute Shell Command    pidof servod
+    ${n}=    Servod Log Count    recovery complete
+    ${a}=    Stats
+    Ampctl    debug fault
+    Wait For Servod Log    recovery complete    ${n + 1}
+    Execute Shell Command    sleep 0.5
+    ${b}=    Stats
+    ${pid2}=    Execute Shell Command    pidof servod
+    Should Be Equal    ${pid}    ${pid2}
+    ${log}=    Execute Shell Command    grep -E "servo (stalled|faulted)" ${LOG} | tail -n 1
+    Log    ${log}    console=True
+    ${stalls}=    Delta    ${a}    ${b}    linux.stalls
+    ${rec}=    Delta    ${a}    ${b}    linux.recoveries
+    ${att}=    Delta    ${a}    ${b}    servo.attach_count
+    ${perr}=    Delta    ${a}    ${b}    linux.peer_errors
+    Should Be True    ${stalls} >= 1
+    Should Be Equal As Integers    ${rec}    ${stalls}
+    Should Be Equal As Integers    ${att}    ${rec}
+    Should Be True    ${perr} >= 1    the FAULT state word was seen
+    Log    fault+hang detected after ${b}[linux.last_stall_cycles] Linux cycles (${perr} cycles with the FAULT word)    console=True
+    Should Be True    ${b}[linux.last_stall_cycles] <= 10 + 1
+    Should Be Equal    ${b}[servo.state]    RUNNING
+    Param Should Be    pos_kp    61.5
+    Param Should Be    wd_limit    10
+    Ampctl    param set wd_limit ${K}
+    ${r}=    Exchange Window    1
+    Exchange Should Run    ${r}
 
 Killing Servod Brings Every Axis To A Safe Stop
     [Documentation]    servod killed (SIGKILL: no close): the servo's watchdog

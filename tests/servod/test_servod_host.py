@@ -1,5 +1,6 @@
 """servod's pieces that need no board (session state machine, setpoint
-sources, path error, request table), built for the host under
+sources, path error, request table, the parameter service against a
+scripted servo on a host buffer, the bounds of what the servo answers), built for the host under
 AddressSanitizer + UBSan with every servod file but main.c."""
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ def test_servod_unit(tmp_path: Path) -> None:
            str(Path(__file__).with_name("test_servod_unit.c")),
            *map(str, _servod_sources()),
            str(TOP / "amp_lib/src/amp_linux.c"), str(TOP / "amp_lib/src/amp_common.c"),
+           str(TOP / "amp_lib/src/amp_servo.c"),
            str(TOP / "amp_lib/src/amp_strerror.c"), str(TOP / "linux/telemetry/telem.c"),
            str(motion_build / "host" / "libmotion.a"), "-lm", "-o", str(exe)]
     subprocess.run(cmd, check=True)

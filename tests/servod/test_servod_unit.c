@@ -9,6 +9,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "check.h"
 #include "context.h"
@@ -125,6 +126,7 @@ static void test_idle_hold(void)
 	for (uint32_t i = 0; i < 4; i++)	/* position unknown: axes disabled */
 		CHECK_EQ(cmd[i].control_word, 0);
 	memset(&fb, 0, sizeof(fb));
+	fb.n_axes = 4;
 	for (uint32_t i = 0; i < 4; i++)
 		fb.axis[i].actual_pos = 100 * (int32_t)i + 7;
 	setpoint_program.feedback(sd, AMP_OK, &fb, 4, 0);	/* not fresh: nothing */
@@ -211,6 +213,292 @@ static void test_requests(void)
 	}
 }
 
+/* ---- issue 13, item 1: what comes back from the servo is checked ----------- */
+
+/* A scripted servo on the other side of a host buffer standing in for OCM:
+ * answers every mailbox request from its own thread, as told. */
+static struct {
+	struct amp_servo s;
+	pthread_t th;
+	atomic_int stop;
+	/* the answer: status, length in bytes, words (-1 = echo the request's) */
+	int32_t status;
+	uint32_t len;
+	int64_t w[2];
+} fake;
+
+static _Alignas(64) uint8_t fake_ocm[AMP_OCM_SIZE];
+
+static void *fake_servo(void *arg)
+{
+	(void)arg;
+	while (!atomic_load(&fake.stop)) {
+		struct amp_mbox_req r;
+		uint32_t out[2], req[2] = { 0, 0 };
+
+		if (amp_servo_mbox_poll(&fake.s, &r) != 1) {
+			usleep(100);
+			continue;
+		}
+		for (uint32_t i = 0; i < 2 && i < r.length / 4u; i++)
+			req[i] = (uint32_t)r.payload[4 * i] | (uint32_t)r.payload[4 * i + 1] << 8 |
+				 (uint32_t)r.payload[4 * i + 2] << 16 | (uint32_t)r.payload[4 * i + 3] << 24;
+		for (int i = 0; i < 2; i++)
+			out[i] = fake.w[i] < 0 ? req[i] : (uint32_t)fake.w[i];
+		(void)amp_servo_mbox_respond(&fake.s, fake.status, out, fake.len);
+	}
+	return 0;
+}
+
+static void fake_answer(int32_t status, uint32_t len, int64_t w0, int64_t w1)
+{
+	fake.status = status;
+	fake.len = len;
+	fake.w[0] = w0;
+	fake.w[1] = w1;
+}
+
+static struct servod *servod_with_fake_servo(char *param_path)
+{
+	struct servod *sd = new_servod(0);
+	int fd = mkstemp(param_path);
+
+	CHECK(fd >= 0);
+	close(fd);
+	unlink(param_path);	/* no file yet: the defaults */
+	sd->opt.param_path = param_path;
+	params_load(sd);
+	sd->axes = sd->pset[SP_P_axes];
+	sd->period_ns = sd->pset[SP_P_cycle_period_us] * 1000u;
+	sd->ocm = fake_ocm;
+	sd->ocm_size = sizeof(fake_ocm);
+	memset(fake_ocm, 0, sizeof(fake_ocm));
+	CHECK_EQ(amp_linux_init(&sd->amp, fake_ocm, sizeof(fake_ocm), 50), AMP_OK);
+	CHECK_EQ(amp_servo_attach(&fake.s, fake_ocm, sizeof(fake_ocm)), AMP_OK);
+	sd->session.state = SESSION_RUNNING;
+	atomic_store(&fake.stop, 0);
+	fake_answer(0, 8, -1, -1);
+	CHECK_EQ(pthread_create(&fake.th, 0, fake_servo, 0), 0);
+	return sd;
+}
+
+static void stop_fake_servo(struct servod *sd, const char *param_path)
+{
+	atomic_store(&fake.stop, 1);
+	pthread_join(fake.th, 0);
+	unlink(param_path);
+	free(sd);
+}
+
+static const struct servod_request *request(const char *name)
+{
+	for (const struct servod_request *r = __start_servod_requests; r < __stop_servod_requests; r++)
+		if (!strcmp(r->name, name))
+			return r;
+	return 0;
+}
+
+/* "param ARGS..." through the request table: the SE_* code, msg and body. */
+static int param_req(struct servod *sd, const char *a1, const char *a2, const char *a3, char *msg, size_t n,
+		     char *body, size_t bn)
+{
+	char *argv[4] = { "param", (char *)a1, (char *)a2, (char *)a3 };
+	char *buf = malloc(4096);
+	struct out o = { buf, 0, 4096 };
+	int rc;
+
+	msg[0] = 0;
+	rc = request("param")->fn(sd, &o, a3 ? 4 : 3, argv, msg, n);
+	snprintf(body, bn, "%.*s", (int)o.len, o.buf);
+	free(o.buf);
+	return rc;
+}
+
+static uint32_t f32w(float f)
+{
+	uint32_t w;
+
+	memcpy(&w, &f, 4);
+	return w;
+}
+
+static void test_param_answers_checked(void)
+{
+	char path[] = "/tmp/servod-unit-params.XXXXXX", msg[256], body[512];
+	struct servod *sd = servod_with_fake_servo(path);
+	uint32_t pset0[SP_P_COUNT];
+	int rc;
+
+	memcpy(pset0, sd->pset, sizeof(pset0));
+	/* a sane answer is taken */
+	CHECK_EQ(param_req(sd, "set", "pos_kp", "61.5", msg, sizeof(msg), body, sizeof(body)), SE_OK);
+	CHECK(strstr(body, "pos_kp=61.5") != 0);
+	CHECK_EQ(sd->pset[SP_P_pos_kp], f32w(61.5f));
+	memcpy(pset0, sd->pset, sizeof(pset0));
+
+	/* a short answer (no value word): refused, nothing read past it */
+	fake_answer(0, 4, -1, -1);
+	rc = param_req(sd, "set", "axes", "3", msg, sizeof(msg), body, sizeof(body));
+	CHECK_EQ(rc, SE_SERVO);
+	CHECK(strstr(msg, "axes") != 0);
+	CHECK_EQ(sd->axes, 4);
+	CHECK_EQ(sd->pset[SP_P_axes], 4);
+	/* an answer for another parameter */
+	fake_answer(0, 8, SP_P_wd_limit, 3);
+	CHECK_EQ(param_req(sd, "set", "axes", "3", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	CHECK_EQ(sd->axes, 4);
+	/* axes 9 (past AMP_MAX_AXES): refused, never servod's axis count */
+	fake_answer(0, 8, -1, AMP_MAX_AXES + 1);
+	CHECK_EQ(param_req(sd, "set", "axes", "3", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	CHECK(strstr(msg, "range") != 0);
+	CHECK_EQ(sd->axes, 4);
+	/* cycle_period_us 0 and 20000: refused, the period stays */
+	fake_answer(0, 8, -1, 0);
+	CHECK_EQ(param_req(sd, "set", "cycle_period_us", "500", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	fake_answer(0, 8, -1, 20000);
+	CHECK_EQ(param_req(sd, "set", "cycle_period_us", "500", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	CHECK_EQ(sd->period_ns, 1000000u);
+	/* wd_limit 0 (servod's watchdog would fall back to its default) */
+	fake_answer(0, 8, -1, 0);
+	CHECK_EQ(param_req(sd, "set", "wd_limit", "20", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	CHECK_EQ(sd->amp.wd.limit, 50);
+	/* a float out of range, NaN, infinity */
+	fake_answer(0, 8, -1, f32w(5000.0f));
+	CHECK_EQ(param_req(sd, "set", "pos_kp", "70", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	fake_answer(0, 8, -1, 0x7fc00000u);
+	CHECK_EQ(param_req(sd, "set", "pos_kp", "70", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	fake_answer(0, 8, -1, 0x7f800000u);
+	CHECK_EQ(param_req(sd, "set", "vel_max", "70", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	/* an i32 below its minimum */
+	fake_answer(0, 8, -1, (uint32_t)-5);
+	CHECK_EQ(param_req(sd, "set", "fe_max", "1000", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	/* the read-only one answered with another value */
+	fake_answer(0, 8, -1, 8);
+	CHECK_EQ(param_req(sd, "set", "fine_steps", "4", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	/* none of it became servod's state */
+	CHECK(!memcmp(pset0, sd->pset, sizeof(pset0)));
+	CHECK_EQ(sd->axes, 4);
+	CHECK_EQ(sd->period_ns, 1000000u);
+
+	/* param get: the value is checked too (short, other id, out of range) */
+	fake_answer(0, 8, -1, 4);
+	CHECK_EQ(param_req(sd, "get", "axes", 0, msg, sizeof(msg), body, sizeof(body)), SE_OK);
+	CHECK(strstr(body, "axes=4") != 0);
+	fake_answer(0, 8, -1, AMP_MAX_AXES + 1);
+	CHECK_EQ(param_req(sd, "get", "axes", 0, msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	CHECK(strstr(msg, "range") != 0);
+	CHECK(!strstr(body, "axes="));
+	fake_answer(0, 4, -1, 4);
+	CHECK_EQ(param_req(sd, "get", "axes", 0, msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
+	CHECK(!strstr(msg, ": ok"));	/* not "axes: ok" for a short answer */
+
+	/* the parameter set at an attach: the answer {n} is checked */
+	fake_answer(0, 4, -1, 0);
+	CHECK_EQ(params_restore(sd, msg, sizeof(msg)), SE_OK);
+	fake_answer(0, 0, -1, 0);
+	CHECK_EQ(params_restore(sd, msg, sizeof(msg)), SE_SERVO);
+	fake_answer(0, 4, 3, 0);
+	CHECK_EQ(params_restore(sd, msg, sizeof(msg)), SE_SERVO);
+	stop_fake_servo(sd, path);
+}
+
+/* The cycle's pieces never index past AMP_MAX_AXES, whatever n they get. */
+static void test_cycle_bounds(void)
+{
+	struct servod *sd = new_servod(0);
+	struct amp_cmd_axis cmd[AMP_MAX_AXES + 2];
+	struct amp_fb_record fb;
+	struct cycle_stats st;
+	struct cycle_wake w = { 1, 1000000, 5000 };
+
+	memset(cmd, 0, sizeof(cmd));
+	memset(&fb, 0, sizeof(fb));
+	/* the sine -> hold hand-over with n = AMP_MAX_AXES + 2 */
+	atomic_store(&sd->prog.req_hold, 1);
+	prog_cycle(&sd->prog, cmd, AMP_MAX_AXES + 2, 1);
+	prog_cycle(&sd->prog, cmd, AMP_MAX_AXES + 2, 2);
+	CHECK_EQ(sd->prog.play.have_hold, 1);
+	CHECK_EQ(sd->prog.play.resync, 0);
+	fb.n_axes = AMP_MAX_AXES;
+	sd->prog.play.resync = 1;
+	prog_feedback(&sd->prog, AMP_OK, &fb, AMP_MAX_AXES + 2, 1);
+
+	/* a period of 0 in the counters: no division by zero */
+	memset(&st, 0, sizeof(st));
+	cycle_stats_wake(&st, &w, 1000000u);
+	w.t_ns += 3000000;
+	cycle_stats_wake(&st, &w, 0);
+	CHECK_EQ(st.wakes, 2);
+	free(sd);
+}
+
+/* Feedback that covers fewer axes than servod commands is no hold position
+ * for the axes it does not cover. */
+static void test_feedback_axis_count(void)
+{
+	struct servod *sd = new_servod(1);
+	struct amp_cmd_axis cmd[AMP_MAX_AXES];
+	struct amp_fb_record fb;
+
+	memset(&fb, 0, sizeof(fb));
+	for (uint32_t i = 0; i < 4; i++)
+		fb.axis[i].actual_pos = 1000 + (int32_t)i;
+	fb.n_axes = 2;	/* the servo says: 2 axes */
+	setpoint_program.feedback(sd, AMP_OK, &fb, 4, 1);
+	setpoint_source(sd)->fill(sd, cmd, 4, 1);
+	CHECK_EQ(sd->prog.play.have_hold, 0);
+	for (uint32_t i = 0; i < 4; i++)	/* still disabled: position unknown */
+		CHECK_EQ(cmd[i].control_word, 0);
+	fb.n_axes = 4;
+	setpoint_program.feedback(sd, AMP_OK, &fb, 4, 1);
+	setpoint_source(sd)->fill(sd, cmd, 4, 2);
+	for (uint32_t i = 0; i < 4; i++) {
+		CHECK_EQ(cmd[i].control_word, AMP_AXIS_ENABLE);
+		CHECK_EQ(cmd[i].target_pos, 1000 + (int32_t)i);
+	}
+	free(sd);
+}
+
+/* Issue 13, item 3: a running program ends when the servo reports a fault
+ * (or a garbled state word), and a fault that lasts wd_limit cycles is
+ * reported for recovery like a stall, once per attach. */
+static void test_peer_error(void)
+{
+	struct servod *sd = new_servod(1);
+	struct amp_fb_record fb;
+	struct cycle_stats st;
+
+	memset(&fb, 0, sizeof(fb));
+	fb.n_axes = 4;
+	setpoint_program.feedback(sd, AMP_OK, &fb, 4, 1);	/* hold known */
+	atomic_store(&sd->prog.mode, PM_RUN);
+	atomic_store(&sd->prog.result, PR_RUNNING);
+	setpoint_program.feedback(sd, AMP_E_PEER_ERROR, &fb, 4, 1);
+	CHECK_EQ(atomic_load(&sd->prog.mode), PM_HOLD);
+	CHECK_EQ(atomic_load(&sd->prog.result), PR_FAULT);
+	CHECK(atomic_load(&sd->prog.link_lost) != 0);
+	CHECK_EQ(sd->prog.play.have_hold, 0);	/* axes disabled until the servo is sane */
+	free(sd);
+
+	memset(&st, 0, sizeof(st));
+	cycle_stats_new_session(&st);
+	for (int i = 1; i < 10; i++)
+		CHECK_EQ(cycle_stats_peer_error(&st, AMP_E_PEER_ERROR, 10, 1, 1000u * (uint64_t)i), 0);
+	CHECK_EQ(cycle_stats_peer_error(&st, AMP_E_PEER_ERROR, 10, 1, 10000), 1);
+	CHECK_EQ(cycle_stats_peer_error(&st, AMP_E_PEER_ERROR, 10, 1, 11000), 0);	/* once */
+	CHECK_EQ(st.stalls, 1);
+	CHECK_EQ(st.peer_errors, 11);
+	/* a sane cycle restarts the count; the restarted servo gets its own report */
+	CHECK_EQ(cycle_stats_peer_error(&st, AMP_OK, 10, 2, 12000), 0);
+	for (int i = 1; i < 10; i++)
+		CHECK_EQ(cycle_stats_peer_error(&st, AMP_E_PEER_ERROR, 10, 2, 12000), 0);
+	CHECK_EQ(cycle_stats_peer_error(&st, AMP_OK, 10, 2, 12000), 0);
+	CHECK_EQ(cycle_stats_peer_error(&st, AMP_E_PEER_ERROR, 10, 2, 12000), 0);
+	for (int i = 1; i < 10; i++)
+		(void)cycle_stats_peer_error(&st, AMP_E_PEER_ERROR, 10, 2, 12000);
+	CHECK_EQ(st.stalls, 2);
+}
+
 int main(void)
 {
 	test_session();
@@ -218,5 +506,9 @@ int main(void)
 	test_idle_hold();
 	test_path_error();
 	test_requests();
+	test_feedback_axis_count();
+	test_peer_error();
+	test_param_answers_checked();
+	test_cycle_bounds();
 	return check_summary("servod unit");
 }

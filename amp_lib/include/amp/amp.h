@@ -90,6 +90,7 @@ struct amp_linux {
 	uint32_t mbox_seq;
 	uint32_t mbox_pending;	/* a request is out, answer not read */
 	uint32_t servo_attach;	/* servo attach_count last seen */
+	uint32_t peer_seen;	/* the servo attached in this epoch: watchdog armed */
 	struct amp_watchdog wd;
 	struct amp_stats st;
 	struct amp_fb_record fb;	/* last whole feedback */
@@ -107,7 +108,9 @@ void amp_linux_close(struct amp_linux *l);
 
 /*
  * AMP_OK if the servo is attached to this epoch and running (or in safe
- * stop), AMP_E_PEER_ABSENT if not attached, AMP_E_PEER_ERROR if faulted.
+ * stop), AMP_E_PEER_ABSENT if not attached (other epoch, or state
+ * OFFLINE), AMP_E_PEER_ERROR if attached but its state word says FAULT or
+ * is no AMP_SSTATE_* at all.
  */
 int amp_linux_peer(const struct amp_linux *l);
 
@@ -135,7 +138,10 @@ int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit);
  * semaphore, read the feedback (into l->fb, described by rx), write the
  * commands (n_axes <= AMP_MAX_AXES), set the semaphore. Returns AMP_OK,
  * AMP_E_INVAL, AMP_E_PEER_ABSENT (servo not attached, commands still
- * published), AMP_E_PEER_ERROR or AMP_E_STALLED (watchdog).
+ * published), AMP_E_PEER_ERROR (state FAULT or garbage) or AMP_E_STALLED.
+ * The heartbeat watchdog runs from the servo's first attach in this epoch
+ * on, whatever the servo's state word says afterwards: AMP_E_STALLED
+ * (heartbeat still for wd_limit cycles) takes precedence over the rest.
  */
 int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		    uint32_t n_axes, uint32_t flags, struct amp_rx_info *rx);
