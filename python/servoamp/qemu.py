@@ -94,6 +94,17 @@ class Board:
         return REPO / "build" / "boards" / self.name
 
 
+def rproc_words(header: Path = REPO / "include" / "servoamp" / "rproc_words.h") -> dict[str, int]:
+    """The start/stop contract's words and offsets (``ZSR_CTRL_STOP``,
+    ``ZSR_STATUS_RUNNING``, ...) as the driver and the firmware compile
+    them: read from their one definition, include/servoamp/rproc_words.h."""
+    words = {m.group(1): int(m.group(2), 0)
+             for m in re.finditer(r"^#define\s+(ZSR_\w+)\s+(0x[0-9a-fA-F]+|\d+)\b", header.read_text(), re.M)}
+    if not words:
+        raise QemuError(f"{header}: no ZSR_ words")
+    return words
+
+
 # --------------------------------------------------------------------------
 # Images
 # --------------------------------------------------------------------------

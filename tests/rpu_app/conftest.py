@@ -16,6 +16,9 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
 BOARD = "zynq7000_qemu"
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(REPO / "python"))  # this tree's servoamp package
+
+from servoamp.qemu import rproc_words  # noqa: E402
 
 # The board contract (fixed numbers shared with the Linux/remoteproc side).
 CONTRACT = {
@@ -36,7 +39,11 @@ CONTRACT = {
     "BOARD_GICC_BASE": 0xF8F00100,
     "BOARD_GTIMER_BASE": 0xF8F00200,
 }
-STOP, RUN, PRKD, CRSH = 0x53544F50, 0x52554E21, 0x50524B44, 0x48535243
+# The driver's control word and the firmware's status words, from their one
+# definition (include/servoamp/rproc_words.h).
+_WORDS = rproc_words()
+STOP, RUN, PRKD, CRSH = (_WORDS[k] for k in ("ZSR_CTRL_STOP", "ZSR_STATUS_RUNNING", "ZSR_STATUS_PARKED",
+                                              "ZSR_STATUS_CRASHED"))
 
 
 def parse_board_config(path: Path) -> dict[str, int]:
