@@ -112,7 +112,7 @@ static int stream_program(struct prog_runner *pr, struct motion *m, const char *
 			ended = rc;
 		}
 		/* output */
-		room = k->to_queue ? spq_room(&pr->queue) : 512u;
+		room = k->to_queue ? ring_room(&pr->queue) : 512u;
 		if (!room) {
 			pause_2ms();
 			continue;
@@ -122,7 +122,7 @@ static int stream_program(struct prog_runner *pr, struct motion *m, const char *
 			enum motion_status st = motion_next_setpoint(m, &sp);
 
 			if (k->to_queue)
-				spq_push(&pr->queue, &sp);
+				ring_push(&pr->queue, &sp);
 			k->last = sp;
 			k->n++;
 			if (st == MOTION_ST_DONE || st == MOTION_ST_FAULT || st == MOTION_ST_UNDERRUN) {
@@ -184,7 +184,7 @@ static int dry_run(struct prog_runner *pr, const struct motion_config *cfg, uint
 /* The cycle thread ends the run on a FAULT setpoint at the last position. */
 static void push_fault_marker(struct prog_runner *pr, struct sink *k)
 {
-	while (spq_room(&pr->queue) == 0 && !atomic_load(&pr->feeder_abort))
+	while (ring_room(&pr->queue) == 0 && !atomic_load(&pr->feeder_abort))
 		pause_2ms();
 	if (atomic_load(&pr->feeder_abort))
 		return;
@@ -193,7 +193,7 @@ static void push_fault_marker(struct prog_runner *pr, struct sink *k)
 	if (!k->n)
 		for (uint32_t i = 0; i < PROG_AXES; i++)
 			k->last.pos[i] = pr->run_start[i];
-	spq_push(&pr->queue, &k->last);
+	ring_push(&pr->queue, &k->last);
 }
 
 /* 2. The run: the cycle thread is ARMED and pops the queue. */

@@ -106,62 +106,6 @@ static uint64_t realtime_ns(void)
 	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
 }
 
-/* ---- SPSC ring ------------------------------------------------------------- */
-int telem_ring_init(struct telem_ring *r, void *storage, uint32_t elem_size, uint32_t capacity)
-{
-	if (!r || !storage || !elem_size || capacity < 2u || capacity > (1u << 30) ||
-	    (capacity & (capacity - 1u)))
-		return -EINVAL;
-	atomic_init(&r->head, 0u);
-	atomic_init(&r->tail, 0u);
-	r->mask = capacity - 1u;
-	r->elem_size = elem_size;
-	r->slots = storage;
-	return 0;
-}
-
-void *telem_ring_write_slot(struct telem_ring *r)
-{
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
-
-	if (h - t > r->mask)
-		return NULL;	/* full */
-	return r->slots + (size_t)(h & r->mask) * r->elem_size;
-}
-
-void telem_ring_commit_write(struct telem_ring *r)
-{
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
-
-	atomic_store_explicit(&r->head, h + 1u, memory_order_release);
-}
-
-const void *telem_ring_read_slot(struct telem_ring *r)
-{
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_relaxed);
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_acquire);
-
-	if (h == t)
-		return NULL;
-	return r->slots + (size_t)(t & r->mask) * r->elem_size;
-}
-
-void telem_ring_commit_read(struct telem_ring *r)
-{
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_relaxed);
-
-	atomic_store_explicit(&r->tail, t + 1u, memory_order_release);
-}
-
-uint32_t telem_ring_level(const struct telem_ring *r)
-{
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_acquire);
-
-	return h - t;
-}
-
 /* ---- configuration ----------------------------------------------------------- */
 void telem_cfg_defaults(struct telem_cfg *cfg)
 {
@@ -243,8 +187,7 @@ static int listen_on(struct telem *t)
 
 int telem_init(struct telem *t, const struct telem_cfg *cfg)
 {
-	size_t ring_bytes;
-	int rc;
+	int rc, ring_rc;
 
 	memset(t, 0, sizeof(*t));
 	t->listen_fd = -1;
@@ -260,23 +203,19 @@ int telem_init(struct telem *t, const struct telem_cfg *cfg)
 	t->cfg.controller_id = t->controller_id;
 	t->session_id = random_id();
 
-	ring_bytes = (size_t)cfg->ring_capacity * sizeof(struct telem_slot);
-	t->ring_mem = calloc(1, ring_bytes);
+	ring_rc = ring_init(&t->ring, sizeof(struct telem_slot), cfg->ring_capacity);
 	t->ev = calloc(cfg->event_capacity, sizeof(struct telem_event));
 	t->clients = calloc(TELEM_MAX_CLIENTS, sizeof(struct telem_client));
 	t->scratch_cap = FRAME_HDR + CYCLE_HDR_LEN + AXIS_LEN * AMP_MAX_AXES + EVENT_MAX;
 	t->scratch = malloc(t->scratch_cap);
-	if (!t->ring_mem || !t->ev || !t->clients || !t->scratch) {
+	if (ring_rc || !t->ev || !t->clients || !t->scratch) {
 		rc = -ENOMEM;
 		goto fail;
 	}
-	if (cfg->mlock)
-		(void)mlock(t->ring_mem, ring_bytes);	/* best effort; servod also mlockall()s */
+	if (cfg->mlock)	/* best effort; servod also mlockall()s */
+		(void)mlock(t->ring.buf, RING_BUF_BYTES(sizeof(struct telem_slot), cfg->ring_capacity));
 	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
 		t->clients[i].fd = -1;
-	rc = telem_ring_init(&t->ring, t->ring_mem, sizeof(struct telem_slot), cfg->ring_capacity);
-	if (rc)
-		goto fail;
 	t->ev_cap = cfg->event_capacity;
 	if (pthread_mutex_init(&t->ev_lock, NULL)) {
 		rc = -ENOMEM;
@@ -297,11 +236,10 @@ int telem_init(struct telem *t, const struct telem_cfg *cfg)
 	}
 	return 0;
 fail:
-	free(t->ring_mem);
+	ring_free(&t->ring);
 	free(t->ev);
 	free(t->clients);
 	free(t->scratch);
-	t->ring_mem = NULL;
 	t->ev = NULL;
 	t->clients = NULL;
 	t->scratch = NULL;
@@ -322,7 +260,7 @@ int telem_push_cycle(struct telem *t, const struct telem_cycle *rec)
 
 	atomic_store_explicit(&t->pushed, t->push_seq, memory_order_relaxed);
 	atomic_store_explicit(&t->last_cycle, rec->cycle, memory_order_relaxed);
-	s = telem_ring_write_slot(&t->ring);
+	s = ring_slot(&t->ring);
 	if (!s) {
 		t->drop_local++;
 		atomic_store_explicit(&t->dropped, t->drop_local, memory_order_relaxed);
@@ -330,7 +268,7 @@ int telem_push_cycle(struct telem *t, const struct telem_cycle *rec)
 	}
 	s->seq = seq;
 	s->c = *rec;
-	telem_ring_commit_write(&t->ring);
+	ring_commit(&t->ring);
 	return 0;
 }
 
@@ -677,15 +615,15 @@ static size_t enc_cycle(struct telem *t, unsigned char *b, const struct telem_cy
 static void drain_ring(struct telem *t)
 {
 	const struct telem_slot *s;
-	uint32_t level = telem_ring_level(&t->ring);
+	uint32_t level = ring_count(&t->ring);
 
 	if (level > atomic_load_explicit(&t->ring_high_water, memory_order_relaxed))
 		atomic_store_explicit(&t->ring_high_water, level, memory_order_relaxed);
-	while ((s = telem_ring_read_slot(&t->ring)) != NULL) {
+	while ((s = ring_front(&t->ring)) != NULL) {
 		uint64_t seq = s->seq, cyc = s->c.cycle, t_ns = s->c.t_ns;
 		size_t n = enc_cycle(t, t->scratch, &s->c);
 
-		telem_ring_commit_read(&t->ring);
+		ring_release(&t->ring);
 		atomic_fetch_add_explicit(&t->drained, 1u, memory_order_relaxed);
 		if (seq != t->expect_seq) {
 			/* records expect_seq .. seq-1 were dropped by the producer */
@@ -927,7 +865,7 @@ void telem_destroy(struct telem *t)
 		close(t->wake_fd[1]);
 		pthread_mutex_destroy(&t->ev_lock);
 	}
-	free(t->ring_mem);
+	ring_free(&t->ring);
 	free(t->ev);
 	free(t->clients);
 	free(t->scratch);
