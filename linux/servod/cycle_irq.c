@@ -62,7 +62,7 @@ int cycle_irq_wait(struct servod *sd, struct cycle_irq *irq, struct cycle_wake *
 	}
 	if (read(irq->fd, &w->count, 4) != 4)
 		return -1;
-	w->t_ns = now_ns();
+	w->t_ns = mono_now_ns();
 	ticks = ttc_rd(irq, TTC_CNT_VAL(LINUX_COUNTER)) & TTC_CNT_MASK;
 	ack_and_rearm(sd, irq);
 	w->lat_ns = (uint32_t)(((uint64_t)ticks * ns_per_tick_q16(irq)) >> 16);

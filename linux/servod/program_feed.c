@@ -13,7 +13,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "clock.h"
+#include "servoamp/mono_clock.h"
 #include "program.h"
 #include "servod.h"
 
@@ -175,7 +175,7 @@ static int dry_run(struct prog_runner *pr, const struct motion_config *cfg, uint
 	pr->info.dry_setpoints = k.n;
 	for (uint32_t i = 0; i < PROG_AXES; i++)
 		pr->info.end_inc[i] = k.last.pos[i];
-	pr->info.t_check_s = (double)(now_ns() - t0) * 1e-9;
+	pr->info.t_check_s = (double)(mono_now_ns() - t0) * 1e-9;
 	pr->info.verdict = 1;
 	pthread_mutex_unlock(&pr->info_lock);
 	return 0;
@@ -233,14 +233,14 @@ static void *feeder_main(void *arg)
 	struct prog_runner *pr = arg;
 	struct motion_config cfg;
 	char msg[512] = "";
-	uint64_t t0 = now_ns();
+	uint64_t t0 = mono_now_ns();
 
 	motion_cfg(pr, &cfg, pr->run_start);
 	if (dry_run(pr, &cfg, t0, msg, sizeof(msg))) {
 		pthread_mutex_lock(&pr->info_lock);
 		snprintf(pr->info.error, sizeof(pr->info.error), "%s", msg);
 		pr->info.verdict = 2;
-		pr->info.t_check_s = (double)(now_ns() - t0) * 1e-9;
+		pr->info.t_check_s = (double)(mono_now_ns() - t0) * 1e-9;
 		pthread_mutex_unlock(&pr->info_lock);
 		pthread_mutex_lock(pr->cycle_lock);
 		if (atomic_load(&pr->mode) == PM_ARMED)

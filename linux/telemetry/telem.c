@@ -5,6 +5,7 @@
  */
 #define _GNU_SOURCE
 #include "telem.h"
+#include "servoamp/mono_clock.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -88,14 +89,6 @@ static unsigned char *frame(unsigned char *p, uint16_t type, uint32_t len)
 	p = put16(p, type);
 	p = put16(p, 0);
 	return put32(p, len);
-}
-
-uint64_t telem_now_ns(void)
-{
-	struct timespec ts;
-
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
 }
 
 static uint64_t realtime_ns(void)
@@ -294,7 +287,7 @@ static int push_event(struct telem *t, const unsigned char *data, uint32_t len)
 
 static uint64_t now_or(uint64_t t_ns)
 {
-	return t_ns ? t_ns : telem_now_ns();
+	return t_ns ? t_ns : mono_now_ns();
 }
 
 int telem_push_param(struct telem *t, uint64_t t_ns, uint32_t id, const char *name,
@@ -501,7 +494,7 @@ static size_t enc_hello(struct telem *t, unsigned char *b)
 	p = put16(p, TELEM_WIRE_VERSION);
 	p = put16(p, 0);
 	p = put64(p, t->session_id);
-	p = put64(p, telem_now_ns());
+	p = put64(p, mono_now_ns());
 	p = put64(p, realtime_ns());
 	p = put32(p, t->cfg.n_axes);
 	p = put32(p, t->cfg.cycle_period_ns);
@@ -670,7 +663,7 @@ static void send_stats(struct telem *t, uint32_t flags)
 	unsigned nc = 0;
 	unsigned char b[STATS_MAX];
 	struct telem_stats st;
-	uint64_t now = telem_now_ns();
+	uint64_t now = mono_now_ns();
 
 	memset(ctr, 0, sizeof(ctr));
 	if (t->cfg.app_counters) {
@@ -766,7 +759,7 @@ static void *drain_main(void *arg)
 {
 	struct telem *t = arg;
 	int tick_ms = (int)(t->cfg.drain_interval_us / 1000u);
-	uint64_t next_stats = telem_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
+	uint64_t next_stats = mono_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
 
 	if (tick_ms < 1)
 		tick_ms = 1;
@@ -774,11 +767,11 @@ static void *drain_main(void *arg)
 		poll_clients(t, tick_ms);
 		drain_ring(t);
 		drain_events(t);
-		if (t->cfg.stats_interval_ms && telem_now_ns() >= next_stats) {
+		if (t->cfg.stats_interval_ms && mono_now_ns() >= next_stats) {
 			send_stats(t, 0);
 			next_stats += (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
-			if (next_stats < telem_now_ns())
-				next_stats = telem_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
+			if (next_stats < mono_now_ns())
+				next_stats = mono_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
 		}
 		flush_all(t);
 	}
@@ -790,7 +783,7 @@ static void *drain_main(void *arg)
 		if (pushed > t->expect_seq) {	/* dropped records at the very end */
 			uint64_t last = atomic_load_explicit(&t->last_cycle, memory_order_relaxed);
 			uint64_t lost = pushed - t->expect_seq;
-			uint64_t now = telem_now_ns();
+			uint64_t now = mono_now_ns();
 
 			broadcast_ring_gap(t, now, t->have_prev ? t->prev_cycle + 1u : last + 1u - lost,
 					   last, lost);
@@ -799,14 +792,14 @@ static void *drain_main(void *arg)
 	}
 	drain_events(t);
 	{
-		uint64_t end = telem_now_ns() + (uint64_t)t->cfg.linger_ms * 1000000ull;
+		uint64_t end = mono_now_ns() + (uint64_t)t->cfg.linger_ms * 1000000ull;
 
 		/* flush first so that the final STATS finds room, then once more */
 		for (int pass = 0; pass < 2; pass++) {
 			if (pass)
 				send_stats(t, STATS_F_FINAL);
 			flush_all(t);
-			while (pending(t) && telem_now_ns() < end) {
+			while (pending(t) && mono_now_ns() < end) {
 				poll_clients(t, 5);
 				flush_all(t);
 			}

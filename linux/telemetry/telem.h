@@ -231,6 +231,5 @@ int telem_push_queues(struct telem *t, uint64_t t_ns, const struct telem_queue_l
 		      unsigned n);
 
 void telem_get_stats(struct telem *t, struct telem_stats *st);
-uint64_t telem_now_ns(void);
 
 #endif /* SERVOAMP_TELEM_H */

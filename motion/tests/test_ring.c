@@ -18,6 +18,7 @@
 
 #include "check.h"
 #include "motion/ring.h"
+#include "servoamp/mono_clock.h"
 
 static int t_init_rejects(void)
 {
@@ -129,22 +130,14 @@ struct spsc {
 	unsigned long received, holes, disorder;
 };
 
-static uint64_t mono_ns(void)
-{
-	struct timespec ts;
-
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
-}
-
 static void *spsc_producer(void *arg)
 {
 	struct spsc *s = arg;
 
 	for (unsigned long i = 0; i < s->n; i++) {
-		uint64_t end = mono_ns() + 150, *slot;
+		uint64_t end = mono_now_ns() + 150, *slot;
 
-		while (mono_ns() < end)
+		while (mono_now_ns() < end)
 			;	/* the cycle thread's pace */
 		slot = ring_slot(&s->r);
 		if (!slot) {

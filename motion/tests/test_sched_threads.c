@@ -13,7 +13,7 @@
 
 #include "check.h"
 #include "motion/ring.h"
-#include "mono_clock.h"
+#include "servoamp/mono_clock.h"
 #include "scheduler.h"
 
 #define NT 6

@@ -14,25 +14,18 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "servoamp/mono_clock.h"
 #include "telem.h"
 
 static int failed, passed;
 #define CHECK(c) do { if (!(c)) { fprintf(stderr, "%s:%d: CHECK(%s) failed\n", __FILE__, __LINE__, #c); failed++; return; } } while (0)
 
-static uint64_t now_ns(void)
-{
-	struct timespec ts;
-
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
-}
-
 /* The cycle thread's pace: a busy wait (no syscall besides the vDSO clock). */
 static void spin_ns(uint64_t ns)
 {
-	uint64_t end = now_ns() + ns;
+	uint64_t end = mono_now_ns() + ns;
 
-	while (now_ns() < end)
+	while (mono_now_ns() < end)
 		;
 }
 
@@ -61,18 +54,18 @@ static void test_push_never_blocks_without_consumer(unsigned long n)
 	CHECK(telem_init(&t, &cfg) == 0);
 	memset(&rec, 0, sizeof(rec));
 	rec.n_axes = 8;
-	t0 = now_ns();
+	t0 = mono_now_ns();
 	for (unsigned long i = 0; i < n; i++) {
-		uint64_t a = now_ns(), d;
+		uint64_t a = mono_now_ns(), d;
 
 		rec.cycle = i;
 		if (telem_push_cycle(&t, &rec))
 			fails++;
-		d = now_ns() - a;
+		d = mono_now_ns() - a;
 		if (d > worst)
 			worst = d;
 	}
-	total = now_ns() - t0;
+	total = mono_now_ns() - t0;
 	telem_get_stats(&t, &st);
 	printf("push without consumer: %lu pushes in %.1f ms, %.0f ns/push, worst %llu ns\n",
 	       n, (double)total / 1e6, (double)total / (double)n, (unsigned long long)worst);
