@@ -83,10 +83,9 @@ def board_cfg(rpu_build) -> dict[str, int]:
 
 def qemu_ok() -> str | None:
     """None when the project's QEMU is there (built on first use), else why not."""
-    from qemu_rpu import qemu_binary
-    from servoamp.qemu import QemuError
+    from servoamp import qemu
     try:
-        qemu_binary()
-    except QemuError as e:
+        qemu.check_qemu(qemu.Board.load(BOARD))
+    except qemu.QemuError as e:
         return f"no usable QEMU: {e}"
     return None
