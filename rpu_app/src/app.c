@@ -5,7 +5,7 @@
  * friction, torque constant, current limit) under a cascaded controller
  * (P position loop with velocity feed-forward and velocity limit, PI
  * velocity loop with anti-windup and current limit), closed on the FINE
- * interpolation of Linux's coarse setpoints (seed 004): each cycle's new
+ * interpolation of Linux's coarse setpoints (coarse/fine interpolation split): each cycle's new
  * coarse target is reached in SP fine_steps (4) linear sub-steps of T/4,
  * and the loops and plants run once per sub-step.
  *
