@@ -16,7 +16,6 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
 BOARD = "zynq7000_qemu"
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(REPO / "python"))  # this tree's servoamp package
 
 from servoamp.qemu import rproc_words  # noqa: E402
 
