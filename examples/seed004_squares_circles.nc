@@ -1,5 +1,5 @@
 %
-(seed 004 verification program: a square and a circle, as in laser deposition welding)
+(squares-and-circles verification program: a square and a circle, as in laser deposition welding)
 (millimetres, absolute machine coordinates, XY plane; servod maps X Y Z to servo axes 0 1 2)
 (at servod's default scale, 1 mm = 1000 increments = 0.1 rev of the emulated axes)
 G21 G90 G17

@@ -4,7 +4,7 @@
 # emulated Zynq-7000 in QEMU, start servod, load and start the servo
 # firmware through the remoteproc sysfs, show the cycle running (trace log,
 # ampctl status/stats, parameters, a hang and its recovery), stop it and
-# shut down cleanly; then run seed 004's squares-and-circles G-code program
+# shut down cleanly; then run the squares-and-circles G-code program
 # through the motion pipeline while recording every cycle into an MCAP file
 # with plots (build/demo/run.mcap, build/demo/plots/).
 set -euo pipefail

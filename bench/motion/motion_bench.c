@@ -28,12 +28,11 @@
 #include <unistd.h>
 
 #include "motion/motion.h"
+#include "servoamp/mono_clock.h"
 
 static double now_s(void)
 {
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+	return (double)mono_now_ns() * 1e-9;
 }
 
 static double cpu_s(void)

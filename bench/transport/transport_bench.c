@@ -26,6 +26,7 @@
 #include <unistd.h>
 
 #include "amp/amp.h"
+#include "servoamp/mono_clock.h"
 
 struct shared {
 	_Alignas(64) uint32_t ping;
@@ -36,14 +37,6 @@ struct shared {
 
 static struct shared *sh;
 static long n_iters = 100000;
-
-static uint64_t now_ns(void)
-{
-	struct timespec ts;
-
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000u + (uint64_t)ts.tv_nsec;
-}
 
 static void pin(int cpu)
 {
@@ -106,13 +99,13 @@ static void raw_peer(void)
 static struct result raw_run(uint64_t *v)
 {
 	for (uint32_t i = 1; i <= (uint32_t)n_iters + 1000u; i++) {
-		uint64_t t0 = now_ns();
+		uint64_t t0 = mono_now_ns();
 
 		st(&sh->ping, i);
 		while (ld(&sh->pong) != i)
 			AMP_PORT_RELAX();
 		if (i > 1000u)
-			v[i - 1001u] = now_ns() - t0;
+			v[i - 1001u] = mono_now_ns() - t0;
 	}
 	return summarise("(c) cache-line ping-pong", v, n_iters);
 }
@@ -146,14 +139,14 @@ static struct result periodic_run(struct amp_linux *l, uint64_t *v)
 	while (!ld(&sh->pong))
 		sched_yield();
 	for (long i = -1000; i < n_iters; i++) {
-		uint64_t t0 = now_ns();
+		uint64_t t0 = mono_now_ns();
 
 		cmd[0].target_pos = (int32_t)i;
 		amp_linux_cycle(l, cmd, AMP_MAX_AXES, 0, &rx);
 		while (ld(&l->ocm->cyc_sem.sem) != AMP_SEM_IDLE)
 			AMP_PORT_RELAX();
 		if (i >= 0)
-			v[i] = now_ns() - t0;
+			v[i] = mono_now_ns() - t0;
 	}
 	return summarise("(a) amp periodic exchange", v, n_iters);
 }
@@ -189,14 +182,14 @@ static struct result mbox_run(struct amp_linux *l, uint32_t len, const char *nam
 	while (!ld(&sh->pong))
 		sched_yield();
 	for (long i = -1000; i < n_iters; i++) {
-		uint64_t t0 = now_ns();
+		uint64_t t0 = mono_now_ns();
 
 		if (amp_linux_mbox_call(l, &req, &resp, 1000000) != AMP_OK) {
 			fprintf(stderr, "mailbox call failed\n");
 			exit(1);
 		}
 		if (i >= 0)
-			v[i] = now_ns() - t0;
+			v[i] = mono_now_ns() - t0;
 	}
 	return summarise(name, v, n_iters);
 }
@@ -224,7 +217,7 @@ static void kernel_peer(int use_eventfd)
 static struct result kernel_run(int use_eventfd, uint64_t *v)
 {
 	for (long i = -1000; i < n_iters; i++) {
-		uint64_t t0 = now_ns(), x = 1;
+		uint64_t t0 = mono_now_ns(), x = 1;
 		int ok;
 
 		if (use_eventfd) {
@@ -239,7 +232,7 @@ static struct result kernel_run(int use_eventfd, uint64_t *v)
 			exit(1);
 		}
 		if (i >= 0)
-			v[i] = now_ns() - t0;
+			v[i] = mono_now_ns() - t0;
 	}
 	return summarise(use_eventfd ? "(d) eventfd ping-pong" : "(e) pipe ping-pong", v, n_iters);
 }

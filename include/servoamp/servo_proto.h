@@ -75,6 +75,20 @@ enum sp_error {
 /* ---- parameters ---------------------------------------------------------- */
 enum sp_type { SP_T_U32 = 0, SP_T_I32 = 1, SP_T_F32 = 2 };
 
+/* An SP_T_F32 value and the payload word that carries it, bit for bit
+ * (IEEE-754 binary32; a union, as the firmware has no memcpy of its own). */
+static inline float sp_f32_from_word(uint32_t w)
+{
+	union { uint32_t u; float f; } c = { .u = w };
+	return c.f;
+}
+
+static inline uint32_t sp_word_from_f32(float f)
+{
+	union { uint32_t u; float f; } c = { .f = f };
+	return c.u;
+}
+
 #define SP_F_RO      (1u << 0)	/* read-only */
 #define SP_F_RESTORE (1u << 1)	/* servod keeps it in its file and loads it at every attach */
 

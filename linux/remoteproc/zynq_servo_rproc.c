@@ -57,12 +57,7 @@
 #include "remoteproc_internal.h"
 
 /* OCM control word (driver-owned) and status word (firmware-owned) */
-#define ZSR_CTRL_OFFSET		0x0
-#define ZSR_STATUS_OFFSET	0x4
-#define ZSR_CTRL_RUN		0x00000000
-#define ZSR_CTRL_STOP		0x53544f50	/* 'STOP' */
-#define ZSR_STATUS_RUNNING	0x52554e21	/* 'RUN!' */
-#define ZSR_STATUS_PARKED	0x50524b44	/* 'PRKD' */
+#include "servoamp/rproc_words.h"
 
 /* SLCR: CPU1 reset and clock stop, used only when a stop times out */
 #define ZSR_SLCR_A9_CPU_RST_CTRL	0x244

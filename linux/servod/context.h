@@ -21,7 +21,7 @@
  *   rproc.c         remoteproc in sysfs: lookup, state, report_crash, trace
  *   fwtrace.c       the firmware's trace lines forwarded as telemetry LOG
  *   telemetry.c     the telemetry transport (linux/telemetry) set-up
- *   uio.c, sysfs.c, log.c, clock.h   small helpers
+ *   uio.c, sysfs.c, log.c   small helpers (the clock: servoamp/mono_clock.h)
  *
  * Locking: sd->lock (priority inheritance) is taken by the cycle thread for
  * its whole cycle after the wake-up; it protects the link (amp), the
@@ -36,7 +36,7 @@
 #include <stdint.h>
 
 #include "amp/amp.h"
-#include "clock.h"
+#include "servoamp/mono_clock.h"
 #include "control.h"
 #include "cycle_irq.h"
 #include "cycle_stats.h"

@@ -30,7 +30,7 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 	/* 2-5: semaphore, feedback, commands, semaphore */
 	memset(&rx, 0, sizeof(rx));
 	rc = amp_linux_cycle(&sd->amp, cmd, n, SP_CMDF_MOTION, &rx);
-	t_done = now_ns();
+	t_done = mono_now_ns();
 	fresh = (rc == AMP_OK || rc == AMP_E_PEER_ERROR) &&
 		(rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED);
 	if (src->feedback)

@@ -7,10 +7,11 @@
 #include <unistd.h>
 
 #include "context.h"
+#include "servoamp/cadence_ttc.h"
 
-#define TTC_CLK_CTRL1 0x04u	/* counter 1 clock control (prescaler) */
-#define TTC_CNT_VAL1  0x1cu	/* counter 1 value */
-#define TTC_ISR1      0x58u	/* counter 1 interrupt register, clear on read */
+/* Linux's counter of the cycle TTC (docs/cycle.md; servo.dts:
+ * linux-cycle-counter = <1>): its interrupt register is the UIO node's reg. */
+#define LINUX_COUNTER 1
 
 static uint32_t ttc_rd(const struct cycle_irq *irq, uint32_t off)
 {
@@ -20,8 +21,8 @@ static uint32_t ttc_rd(const struct cycle_irq *irq, uint32_t off)
 /* Counter 1's tick in ns, Q16 (its prescaler as the firmware set it). */
 static uint32_t ns_per_tick_q16(const struct cycle_irq *irq)
 {
-	uint32_t clk = ttc_rd(irq, TTC_CLK_CTRL1);
-	uint64_t div = (clk & 1u) ? 2ull << ((clk >> 1) & 0xfu) : 1u;
+	uint32_t clk = ttc_rd(irq, TTC_CLK_CTRL(LINUX_COUNTER));
+	uint64_t div = ttc_clk_div(clk);
 
 	return (uint32_t)((div * 1000000000ull * 65536u) / irq->ttc_hz);
 }
@@ -35,7 +36,7 @@ int cycle_irq_open(struct servod *sd, struct cycle_irq *irq, uint32_t ttc_hz)
 	if (irq->fd < 0)
 		return -1;
 	irq->ttc += offs;	/* the node's reg is counter 1's interrupt register */
-	irq->ttc -= TTC_ISR1;	/* ... registers addressed from the TTC base */
+	irq->ttc -= TTC_ISR(LINUX_COUNTER);	/* ... registers addressed from the TTC base */
 	return 0;
 }
 
@@ -44,7 +45,7 @@ static void ack_and_rearm(struct servod *sd, struct cycle_irq *irq)
 {
 	uint32_t one = 1;
 
-	(void)ttc_rd(irq, TTC_ISR1);
+	(void)ttc_rd(irq, TTC_ISR(LINUX_COUNTER));
 	if (write(irq->fd, &one, 4) != 4)
 		log_rt(sd, "uio: re-enable failed: %s", strerror(errno));
 }
@@ -61,8 +62,8 @@ int cycle_irq_wait(struct servod *sd, struct cycle_irq *irq, struct cycle_wake *
 	}
 	if (read(irq->fd, &w->count, 4) != 4)
 		return -1;
-	w->t_ns = now_ns();
-	ticks = ttc_rd(irq, TTC_CNT_VAL1) & 0xffffu;
+	w->t_ns = mono_now_ns();
+	ticks = ttc_rd(irq, TTC_CNT_VAL(LINUX_COUNTER)) & TTC_CNT_MASK;
 	ack_and_rearm(sd, irq);
 	w->lat_ns = (uint32_t)(((uint64_t)ticks * ns_per_tick_q16(irq)) >> 16);
 	return 0;

@@ -15,7 +15,7 @@ int mbox_request(struct servod *sd, uint32_t command, const void *req, uint32_t 
 	struct amp_msg q = { command, 0, len, len, (void *)req };
 	struct amp_msg r = { 0, 0, 0, cap, resp };
 	const uint64_t limit = MBOX_TIMEOUT_MS * 1000000ull;
-	uint64_t t0 = now_ns();
+	uint64_t t0 = mono_now_ns();
 	int rc;
 
 	/* the servo may still hold the token of an earlier request it did
@@ -24,7 +24,7 @@ int mbox_request(struct servod *sd, uint32_t command, const void *req, uint32_t 
 		pthread_mutex_lock(&sd->lock);
 		rc = session_open(&sd->session) ? amp_linux_mbox_post(&sd->amp, &q) : AMP_E_PEER_ABSENT;
 		pthread_mutex_unlock(&sd->lock);
-		if (rc != AMP_E_BUSY || now_ns() - t0 > limit)
+		if (rc != AMP_E_BUSY || mono_now_ns() - t0 > limit)
 			break;
 		usleep(200);
 	}
@@ -33,7 +33,7 @@ int mbox_request(struct servod *sd, uint32_t command, const void *req, uint32_t 
 			usleep(200);
 			pthread_mutex_lock(&sd->lock);
 			rc = amp_linux_mbox_poll(&sd->amp, &r);
-			if (rc == AMP_E_BUSY && now_ns() - t0 > limit) {
+			if (rc == AMP_E_BUSY && mono_now_ns() - t0 > limit) {
 				(void)amp_linux_mbox_cancel(&sd->amp);
 				rc = AMP_E_TIMEOUT;
 			}

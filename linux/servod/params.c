@@ -31,26 +31,10 @@ static int param_by_name(const char *s)
 	return -1;
 }
 
-static float f_of(uint32_t w)
-{
-	float f;
-
-	memcpy(&f, &w, 4);
-	return f;
-}
-
-static uint32_t w_of(float f)
-{
-	uint32_t w;
-
-	memcpy(&w, &f, 4);
-	return w;
-}
-
 static double param_double(const struct sp_param_desc *d, uint32_t w)
 {
 	switch (d->type) {
-	case SP_T_F32: return (double)f_of(w);
+	case SP_T_F32: return (double)sp_f32_from_word(w);
 	case SP_T_I32: return (double)(int32_t)w;
 	default: return (double)w;
 	}
@@ -59,7 +43,7 @@ static double param_double(const struct sp_param_desc *d, uint32_t w)
 static void fmt_value(const struct sp_param_desc *d, uint32_t w, char *buf, size_t n)
 {
 	switch (d->type) {
-	case SP_T_F32: snprintf(buf, n, "%.9g", (double)f_of(w)); break;
+	case SP_T_F32: snprintf(buf, n, "%.9g", (double)sp_f32_from_word(w)); break;
 	case SP_T_I32: snprintf(buf, n, "%d", (int32_t)w); break;
 	default: snprintf(buf, n, "%u", w); break;
 	}
@@ -105,7 +89,7 @@ static int parse_value(const struct servod *sd, const struct sp_param_desc *d, c
 			ok = -1;
 		else if (f < (float)d->min || f > (float)d->max)
 			ok = 0;
-		*w = w_of(f);
+		*w = sp_word_from_f32(f);
 	} else {
 		long long v = strtoll(s, &end, 0);
 
@@ -139,7 +123,7 @@ static void params_defaults(struct servod *sd)
 	for (int i = 0; i < SP_P_COUNT; i++) {
 		const struct sp_param_desc *d = &param_desc[i];
 
-		sd->pset[i] = d->type == SP_T_F32 ? w_of((float)d->def) :
+		sd->pset[i] = d->type == SP_T_F32 ? sp_word_from_f32((float)d->def) :
 			      d->type == SP_T_I32 ? (uint32_t)(int32_t)d->def : (uint32_t)d->def;
 	}
 }

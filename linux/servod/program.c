@@ -12,6 +12,7 @@
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
@@ -29,6 +30,10 @@ void prog_init(struct prog_runner *pr, const struct prog_opts *o, pthread_mutex_
 {
 	pr->opt = *o;
 	pr->cycle_lock = cycle_lock;
+	/* cannot fail: queue_buf is aligned and sized for PROG_QUEUE_N */
+	if (ring_init_buf(&pr->queue, pr->queue_buf, sizeof(pr->queue_buf), sizeof(struct motion_setpoint),
+			  PROG_QUEUE_N))
+		abort();
 	pthread_mutex_init(&pr->info_lock, 0);
 	atomic_store(&pr->mode, o->idle_hold ? PM_HOLD : PM_SINE);
 	pr->play.resync = o->idle_hold;
@@ -71,14 +76,14 @@ static void run_cycle(struct prog_runner *pr, struct amp_cmd_axis *cmd, uint32_t
 	const struct motion_setpoint *sp;
 
 	p->prog_cycles++;
-	sp = spq_peek(&pr->queue);
+	sp = ring_front(&pr->queue);
 	if (!sp) {
 		p->underruns++;	/* hold the last setpoint for this cycle */
 		set_prog_cmd(p, cmd, n, p->cur.pos, 0);
 		return;
 	}
 	p->cur = *sp;
-	spq_drop(&pr->queue);
+	ring_release(&pr->queue);
 	p->setpoints_used++;
 	p->line = p->cur.line;
 	set_prog_cmd(p, cmd, n, p->cur.pos, p->cur.vel);
@@ -102,16 +107,16 @@ static void stop_cycle(struct prog_runner *pr, struct amp_cmd_axis *cmd, uint32_
 		p->stop_s = 0.0;
 	p->stop_f += p->stop_s;
 	while (p->stop_f >= 1.0) {
-		nx = spq_peek(&pr->queue);
+		nx = ring_front(&pr->queue);
 		if (!nx || nx->status != MOTION_ST_MOVING) {
 			p->stop_f = 0.0;
 			break;
 		}
 		p->cur = *nx;
-		spq_drop(&pr->queue);
+		ring_release(&pr->queue);
 		p->stop_f -= 1.0;
 	}
-	nx = spq_peek(&pr->queue);
+	nx = ring_front(&pr->queue);
 	for (uint32_t i = 0; i < PROG_AXES; i++) {
 		double b = (nx && nx->status == MOTION_ST_MOVING) ? nx->pos[i] : p->cur.pos[i];
 
@@ -142,7 +147,7 @@ static int next_mode(struct prog_runner *pr, const struct amp_cmd_axis *cmd, uin
 			prog_end_run(pr, PR_STOPPED);
 			m = PM_HOLD;
 		} else if (++p->armed_cycles >= SETTLE_CYCLES &&
-			   (spq_count(&pr->queue) >= PREFILL || atomic_load(&pr->feeder_done))) {
+			   (ring_count(&pr->queue) >= PREFILL || atomic_load(&pr->feeder_done))) {
 			m = PM_RUN;
 			path_error_start(&p->pe, seq);
 			atomic_store(&pr->mode, m);
@@ -281,7 +286,7 @@ static void arm_run(struct prog_runner *pr, const char *path, uint32_t period_us
 	memset(&p->cur, 0, sizeof(p->cur));
 	for (uint32_t i = 0; i < PROG_AXES; i++)
 		p->cur.pos[i] = p->hold_pos[i];
-	spq_reset(&pr->queue);
+	ring_reset(&pr->queue);
 	atomic_store(&pr->req_stop, 0);
 	atomic_store(&pr->feeder_done, 0);
 	atomic_store(&pr->feeder_abort, 0);

@@ -12,7 +12,8 @@
  *    whole program with a dry run through a second pipeline instance, then
  *    streams the file into the pipeline with its XOFF/XON watermark flow
  *    control and calls motion_next_setpoint() ahead of time into a
- *    lock-free SPSC queue of setpoints (setpoint_queue.h);
+ *    lock-free SPSC queue of setpoints (queue: motion/ring.h, in the
+ *    runner's own storage);
  *  - the cycle thread (SCHED_FIFO) only pops that queue: prog_cycle() and
  *    prog_feedback() never block, never allocate, never make a syscall.
  *    An empty queue while a program runs is an underrun: the axes hold the
@@ -38,9 +39,10 @@
 #include "amp/amp.h"
 #include "motion/motion.h"
 #include "path_error.h"
-#include "setpoint_queue.h"
+#include "motion/ring.h"
 
 #define PROG_AXES 3u		/* X Y Z drive servo axes 0 1 2 */
+#define PROG_QUEUE_N 1024u	/* setpoints buffered ahead (1.02 s at 1 ms), a power of two */
 
 struct out;
 
@@ -89,7 +91,8 @@ struct prog_runner {
 	atomic_int req_hold, req_stop, feeder_done, feeder_abort;
 	atomic_int link_lost;		/* why a run ended: 1 link lost, 2 safe stop, 3 servo fault */
 	struct prog_playback play;
-	struct setpoint_queue queue;
+	struct ring queue;		/* struct motion_setpoint: feeder -> cycle thread */
+	_Alignas(RING_CACHELINE) unsigned char queue_buf[RING_BUF_BYTES(sizeof(struct motion_setpoint), PROG_QUEUE_N)];
 	pthread_mutex_t info_lock;
 	struct prog_info info;
 	/* the feeder thread */

@@ -13,7 +13,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "clock.h"
+#include "servoamp/mono_clock.h"
 #include "program.h"
 #include "servod.h"
 
@@ -112,7 +112,7 @@ static int stream_program(struct prog_runner *pr, struct motion *m, const char *
 			ended = rc;
 		}
 		/* output */
-		room = k->to_queue ? spq_room(&pr->queue) : 512u;
+		room = k->to_queue ? ring_room(&pr->queue) : 512u;
 		if (!room) {
 			pause_2ms();
 			continue;
@@ -122,7 +122,7 @@ static int stream_program(struct prog_runner *pr, struct motion *m, const char *
 			enum motion_status st = motion_next_setpoint(m, &sp);
 
 			if (k->to_queue)
-				spq_push(&pr->queue, &sp);
+				ring_push(&pr->queue, &sp);
 			k->last = sp;
 			k->n++;
 			if (st == MOTION_ST_DONE || st == MOTION_ST_FAULT || st == MOTION_ST_UNDERRUN) {
@@ -175,7 +175,7 @@ static int dry_run(struct prog_runner *pr, const struct motion_config *cfg, uint
 	pr->info.dry_setpoints = k.n;
 	for (uint32_t i = 0; i < PROG_AXES; i++)
 		pr->info.end_inc[i] = k.last.pos[i];
-	pr->info.t_check_s = (double)(now_ns() - t0) * 1e-9;
+	pr->info.t_check_s = (double)(mono_now_ns() - t0) * 1e-9;
 	pr->info.verdict = 1;
 	pthread_mutex_unlock(&pr->info_lock);
 	return 0;
@@ -184,7 +184,7 @@ static int dry_run(struct prog_runner *pr, const struct motion_config *cfg, uint
 /* The cycle thread ends the run on a FAULT setpoint at the last position. */
 static void push_fault_marker(struct prog_runner *pr, struct sink *k)
 {
-	while (spq_room(&pr->queue) == 0 && !atomic_load(&pr->feeder_abort))
+	while (ring_room(&pr->queue) == 0 && !atomic_load(&pr->feeder_abort))
 		pause_2ms();
 	if (atomic_load(&pr->feeder_abort))
 		return;
@@ -193,7 +193,7 @@ static void push_fault_marker(struct prog_runner *pr, struct sink *k)
 	if (!k->n)
 		for (uint32_t i = 0; i < PROG_AXES; i++)
 			k->last.pos[i] = pr->run_start[i];
-	spq_push(&pr->queue, &k->last);
+	ring_push(&pr->queue, &k->last);
 }
 
 /* 2. The run: the cycle thread is ARMED and pops the queue. */
@@ -233,14 +233,14 @@ static void *feeder_main(void *arg)
 	struct prog_runner *pr = arg;
 	struct motion_config cfg;
 	char msg[512] = "";
-	uint64_t t0 = now_ns();
+	uint64_t t0 = mono_now_ns();
 
 	motion_cfg(pr, &cfg, pr->run_start);
 	if (dry_run(pr, &cfg, t0, msg, sizeof(msg))) {
 		pthread_mutex_lock(&pr->info_lock);
 		snprintf(pr->info.error, sizeof(pr->info.error), "%s", msg);
 		pr->info.verdict = 2;
-		pr->info.t_check_s = (double)(now_ns() - t0) * 1e-9;
+		pr->info.t_check_s = (double)(mono_now_ns() - t0) * 1e-9;
 		pthread_mutex_unlock(&pr->info_lock);
 		pthread_mutex_lock(pr->cycle_lock);
 		if (atomic_load(&pr->mode) == PM_ARMED)

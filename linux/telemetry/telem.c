@@ -5,6 +5,7 @@
  */
 #define _GNU_SOURCE
 #include "telem.h"
+#include "servoamp/mono_clock.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -90,76 +91,12 @@ static unsigned char *frame(unsigned char *p, uint16_t type, uint32_t len)
 	return put32(p, len);
 }
 
-uint64_t telem_now_ns(void)
-{
-	struct timespec ts;
-
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
-}
-
 static uint64_t realtime_ns(void)
 {
 	struct timespec ts;
 
 	clock_gettime(CLOCK_REALTIME, &ts);
 	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
-}
-
-/* ---- SPSC ring ------------------------------------------------------------- */
-int telem_ring_init(struct telem_ring *r, void *storage, uint32_t elem_size, uint32_t capacity)
-{
-	if (!r || !storage || !elem_size || capacity < 2u || capacity > (1u << 30) ||
-	    (capacity & (capacity - 1u)))
-		return -EINVAL;
-	atomic_init(&r->head, 0u);
-	atomic_init(&r->tail, 0u);
-	r->mask = capacity - 1u;
-	r->elem_size = elem_size;
-	r->slots = storage;
-	return 0;
-}
-
-void *telem_ring_write_slot(struct telem_ring *r)
-{
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
-
-	if (h - t > r->mask)
-		return NULL;	/* full */
-	return r->slots + (size_t)(h & r->mask) * r->elem_size;
-}
-
-void telem_ring_commit_write(struct telem_ring *r)
-{
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_relaxed);
-
-	atomic_store_explicit(&r->head, h + 1u, memory_order_release);
-}
-
-const void *telem_ring_read_slot(struct telem_ring *r)
-{
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_relaxed);
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_acquire);
-
-	if (h == t)
-		return NULL;
-	return r->slots + (size_t)(t & r->mask) * r->elem_size;
-}
-
-void telem_ring_commit_read(struct telem_ring *r)
-{
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_relaxed);
-
-	atomic_store_explicit(&r->tail, t + 1u, memory_order_release);
-}
-
-uint32_t telem_ring_level(const struct telem_ring *r)
-{
-	uint32_t t = atomic_load_explicit(&r->tail, memory_order_acquire);
-	uint32_t h = atomic_load_explicit(&r->head, memory_order_acquire);
-
-	return h - t;
 }
 
 /* ---- configuration ----------------------------------------------------------- */
@@ -243,8 +180,7 @@ static int listen_on(struct telem *t)
 
 int telem_init(struct telem *t, const struct telem_cfg *cfg)
 {
-	size_t ring_bytes;
-	int rc;
+	int rc, ring_rc;
 
 	memset(t, 0, sizeof(*t));
 	t->listen_fd = -1;
@@ -260,23 +196,19 @@ int telem_init(struct telem *t, const struct telem_cfg *cfg)
 	t->cfg.controller_id = t->controller_id;
 	t->session_id = random_id();
 
-	ring_bytes = (size_t)cfg->ring_capacity * sizeof(struct telem_slot);
-	t->ring_mem = calloc(1, ring_bytes);
+	ring_rc = ring_init(&t->ring, sizeof(struct telem_slot), cfg->ring_capacity);
 	t->ev = calloc(cfg->event_capacity, sizeof(struct telem_event));
 	t->clients = calloc(TELEM_MAX_CLIENTS, sizeof(struct telem_client));
 	t->scratch_cap = FRAME_HDR + CYCLE_HDR_LEN + AXIS_LEN * AMP_MAX_AXES + EVENT_MAX;
 	t->scratch = malloc(t->scratch_cap);
-	if (!t->ring_mem || !t->ev || !t->clients || !t->scratch) {
+	if (ring_rc || !t->ev || !t->clients || !t->scratch) {
 		rc = -ENOMEM;
 		goto fail;
 	}
-	if (cfg->mlock)
-		(void)mlock(t->ring_mem, ring_bytes);	/* best effort; servod also mlockall()s */
+	if (cfg->mlock)	/* best effort; servod also mlockall()s */
+		(void)mlock(t->ring.buf, RING_BUF_BYTES(sizeof(struct telem_slot), cfg->ring_capacity));
 	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
 		t->clients[i].fd = -1;
-	rc = telem_ring_init(&t->ring, t->ring_mem, sizeof(struct telem_slot), cfg->ring_capacity);
-	if (rc)
-		goto fail;
 	t->ev_cap = cfg->event_capacity;
 	if (pthread_mutex_init(&t->ev_lock, NULL)) {
 		rc = -ENOMEM;
@@ -297,11 +229,10 @@ int telem_init(struct telem *t, const struct telem_cfg *cfg)
 	}
 	return 0;
 fail:
-	free(t->ring_mem);
+	ring_free(&t->ring);
 	free(t->ev);
 	free(t->clients);
 	free(t->scratch);
-	t->ring_mem = NULL;
 	t->ev = NULL;
 	t->clients = NULL;
 	t->scratch = NULL;
@@ -322,7 +253,7 @@ int telem_push_cycle(struct telem *t, const struct telem_cycle *rec)
 
 	atomic_store_explicit(&t->pushed, t->push_seq, memory_order_relaxed);
 	atomic_store_explicit(&t->last_cycle, rec->cycle, memory_order_relaxed);
-	s = telem_ring_write_slot(&t->ring);
+	s = ring_slot(&t->ring);
 	if (!s) {
 		t->drop_local++;
 		atomic_store_explicit(&t->dropped, t->drop_local, memory_order_relaxed);
@@ -330,7 +261,7 @@ int telem_push_cycle(struct telem *t, const struct telem_cycle *rec)
 	}
 	s->seq = seq;
 	s->c = *rec;
-	telem_ring_commit_write(&t->ring);
+	ring_commit(&t->ring);
 	return 0;
 }
 
@@ -356,7 +287,7 @@ static int push_event(struct telem *t, const unsigned char *data, uint32_t len)
 
 static uint64_t now_or(uint64_t t_ns)
 {
-	return t_ns ? t_ns : telem_now_ns();
+	return t_ns ? t_ns : mono_now_ns();
 }
 
 int telem_push_param(struct telem *t, uint64_t t_ns, uint32_t id, const char *name,
@@ -563,7 +494,7 @@ static size_t enc_hello(struct telem *t, unsigned char *b)
 	p = put16(p, TELEM_WIRE_VERSION);
 	p = put16(p, 0);
 	p = put64(p, t->session_id);
-	p = put64(p, telem_now_ns());
+	p = put64(p, mono_now_ns());
 	p = put64(p, realtime_ns());
 	p = put32(p, t->cfg.n_axes);
 	p = put32(p, t->cfg.cycle_period_ns);
@@ -677,15 +608,15 @@ static size_t enc_cycle(struct telem *t, unsigned char *b, const struct telem_cy
 static void drain_ring(struct telem *t)
 {
 	const struct telem_slot *s;
-	uint32_t level = telem_ring_level(&t->ring);
+	uint32_t level = ring_count(&t->ring);
 
 	if (level > atomic_load_explicit(&t->ring_high_water, memory_order_relaxed))
 		atomic_store_explicit(&t->ring_high_water, level, memory_order_relaxed);
-	while ((s = telem_ring_read_slot(&t->ring)) != NULL) {
+	while ((s = ring_front(&t->ring)) != NULL) {
 		uint64_t seq = s->seq, cyc = s->c.cycle, t_ns = s->c.t_ns;
 		size_t n = enc_cycle(t, t->scratch, &s->c);
 
-		telem_ring_commit_read(&t->ring);
+		ring_release(&t->ring);
 		atomic_fetch_add_explicit(&t->drained, 1u, memory_order_relaxed);
 		if (seq != t->expect_seq) {
 			/* records expect_seq .. seq-1 were dropped by the producer */
@@ -732,7 +663,7 @@ static void send_stats(struct telem *t, uint32_t flags)
 	unsigned nc = 0;
 	unsigned char b[STATS_MAX];
 	struct telem_stats st;
-	uint64_t now = telem_now_ns();
+	uint64_t now = mono_now_ns();
 
 	memset(ctr, 0, sizeof(ctr));
 	if (t->cfg.app_counters) {
@@ -828,7 +759,7 @@ static void *drain_main(void *arg)
 {
 	struct telem *t = arg;
 	int tick_ms = (int)(t->cfg.drain_interval_us / 1000u);
-	uint64_t next_stats = telem_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
+	uint64_t next_stats = mono_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
 
 	if (tick_ms < 1)
 		tick_ms = 1;
@@ -836,11 +767,11 @@ static void *drain_main(void *arg)
 		poll_clients(t, tick_ms);
 		drain_ring(t);
 		drain_events(t);
-		if (t->cfg.stats_interval_ms && telem_now_ns() >= next_stats) {
+		if (t->cfg.stats_interval_ms && mono_now_ns() >= next_stats) {
 			send_stats(t, 0);
 			next_stats += (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
-			if (next_stats < telem_now_ns())
-				next_stats = telem_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
+			if (next_stats < mono_now_ns())
+				next_stats = mono_now_ns() + (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
 		}
 		flush_all(t);
 	}
@@ -852,7 +783,7 @@ static void *drain_main(void *arg)
 		if (pushed > t->expect_seq) {	/* dropped records at the very end */
 			uint64_t last = atomic_load_explicit(&t->last_cycle, memory_order_relaxed);
 			uint64_t lost = pushed - t->expect_seq;
-			uint64_t now = telem_now_ns();
+			uint64_t now = mono_now_ns();
 
 			broadcast_ring_gap(t, now, t->have_prev ? t->prev_cycle + 1u : last + 1u - lost,
 					   last, lost);
@@ -861,14 +792,14 @@ static void *drain_main(void *arg)
 	}
 	drain_events(t);
 	{
-		uint64_t end = telem_now_ns() + (uint64_t)t->cfg.linger_ms * 1000000ull;
+		uint64_t end = mono_now_ns() + (uint64_t)t->cfg.linger_ms * 1000000ull;
 
 		/* flush first so that the final STATS finds room, then once more */
 		for (int pass = 0; pass < 2; pass++) {
 			if (pass)
 				send_stats(t, STATS_F_FINAL);
 			flush_all(t);
-			while (pending(t) && telem_now_ns() < end) {
+			while (pending(t) && mono_now_ns() < end) {
 				poll_clients(t, 5);
 				flush_all(t);
 			}
@@ -927,7 +858,7 @@ void telem_destroy(struct telem *t)
 		close(t->wake_fd[1]);
 		pthread_mutex_destroy(&t->ev_lock);
 	}
-	free(t->ring_mem);
+	ring_free(&t->ring);
 	free(t->ev);
 	free(t->clients);
 	free(t->scratch);

@@ -33,6 +33,7 @@
 #include <stdint.h>
 
 #include "amp/amp_ocm_layout.h"	/* struct amp_cmd_axis, amp_fb_axis, AMP_MAX_AXES */
+#include "motion/ring.h"		/* the repository's SPSC ring */
 
 #define TELEM_WIRE_VERSION 1u
 #define TELEM_MAGIC 0x4d4c5453u		/* "STLM" little-endian */
@@ -161,28 +162,6 @@ struct telem_stats {
 	uint32_t ring_high_water;
 };
 
-/* ---- the SPSC ring (also usable alone) ---------------------------------- */
-struct telem_ring {
-	_Alignas(64) _Atomic uint32_t head;	/* written by the producer */
-	_Alignas(64) _Atomic uint32_t tail;	/* written by the consumer */
-	_Alignas(64) uint32_t mask;
-	uint32_t elem_size;
-	unsigned char *slots;
-};
-
-/* capacity: power of two >= 2; storage: capacity * elem_size bytes. */
-int telem_ring_init(struct telem_ring *r, void *storage, uint32_t elem_size, uint32_t capacity);
-/* Producer: slot to fill, or NULL when full (never waits). */
-void *telem_ring_write_slot(struct telem_ring *r);
-/* Producer: publish the slot returned by telem_ring_write_slot. */
-void telem_ring_commit_write(struct telem_ring *r);
-/* Consumer: the oldest record, or NULL when empty. */
-const void *telem_ring_read_slot(struct telem_ring *r);
-/* Consumer: release the slot returned by telem_ring_read_slot. */
-void telem_ring_commit_read(struct telem_ring *r);
-/* Records in the ring now (either side; a snapshot). */
-uint32_t telem_ring_level(const struct telem_ring *r);
-
 /* ---- the transport -------------------------------------------------------- */
 struct telem_client;
 struct telem_event;
@@ -191,8 +170,7 @@ struct telem {
 	struct telem_cfg cfg;
 	char controller_id[TELEM_ID_LEN];
 	uint64_t session_id;
-	struct telem_ring ring;
-	void *ring_mem;
+	struct ring ring;		/* the cycle records (struct telem_slot), motion/ring.h */
 	/* producer-only state, published with relaxed stores */
 	uint64_t push_seq;		/* producer-local */
 	uint64_t drop_local;		/* producer-local */
@@ -253,6 +231,5 @@ int telem_push_queues(struct telem *t, uint64_t t_ns, const struct telem_queue_l
 		      unsigned n);
 
 void telem_get_stats(struct telem *t, struct telem_stats *st);
-uint64_t telem_now_ns(void);
 
 #endif /* SERVOAMP_TELEM_H */

@@ -16,7 +16,7 @@
 
 #include "config.h"
 #include "items.h"
-#include "mono_clock.h"
+#include "servoamp/mono_clock.h"
 #include "pipeline_state.h"
 
 static const char *const queue_names[MOTION_N_QUEUES] = {

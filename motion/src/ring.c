@@ -10,42 +10,77 @@ int ring_init(struct ring *r, size_t elem, uint32_t cap)
 	return ring_init_slots(r, elem, cap, cap);
 }
 
-int ring_init_slots(struct ring *r, size_t elem, uint32_t cap, uint32_t slots)
+/* Storage size for `slots` items (a power of two), or 0 if out of range. */
+static uint32_t ring_size(size_t elem, uint32_t cap, uint32_t slots)
 {
 	uint32_t size = 1;
 
-	memset(r, 0, sizeof(*r));
 	if (elem == 0 || cap == 0 || cap > (1u << 30) || slots > (1u << 30))
-		return -1;
+		return 0;
 	if (slots < cap)
 		slots = cap;
 	while (size < slots)
 		size <<= 1;
-	size_t stride = elem;
-	if (elem > RING_CACHELINE / 2)
-		stride = (elem + RING_CACHELINE - 1) / RING_CACHELINE * RING_CACHELINE;
-	if ((size_t)size > (SIZE_MAX - RING_CACHELINE) / stride)
-		return -1;
-	r->buf = aligned_alloc(RING_CACHELINE,
-			       ((size_t)size * stride + RING_CACHELINE - 1) /
-				       RING_CACHELINE * RING_CACHELINE);
-	if (!r->buf)
-		return -1;
-	memset(r->buf, 0, (size_t)size * stride);
+	if ((size_t)size > (SIZE_MAX - RING_CACHELINE) / RING_STRIDE(elem))
+		return 0;
+	return size;
+}
+
+static void ring_setup(struct ring *r, void *buf, size_t elem, uint32_t cap, uint32_t size, bool owned)
+{
+	r->buf = buf;
+	memset(r->buf, 0, RING_BUF_BYTES(elem, size));
 	r->elem = elem;
-	r->stride = stride;
+	r->stride = RING_STRIDE(elem);
 	r->cap = cap;
 	r->mask = size - 1u;
-	atomic_init(&r->head, 0u);
-	atomic_init(&r->tail, 0u);
-	atomic_init(&r->peak, 0u);
+	r->owned = owned;
+	ring_reset(r);
+}
+
+int ring_init_slots(struct ring *r, size_t elem, uint32_t cap, uint32_t slots)
+{
+	uint32_t size = ring_size(elem, cap, slots);
+	void *buf;
+
+	memset(r, 0, sizeof(*r));
+	if (!size)
+		return -1;
+	buf = aligned_alloc(RING_CACHELINE,
+			    (RING_BUF_BYTES(elem, size) + RING_CACHELINE - 1) /
+				    RING_CACHELINE * RING_CACHELINE);
+	if (!buf)
+		return -1;
+	ring_setup(r, buf, elem, cap, size, true);
+	return 0;
+}
+
+int ring_init_buf(struct ring *r, void *buf, size_t bytes, size_t elem, uint32_t cap)
+{
+	uint32_t size = ring_size(elem, cap, cap);
+
+	memset(r, 0, sizeof(*r));
+	if (!size || !buf || (uintptr_t)buf % RING_CACHELINE || bytes < RING_BUF_BYTES(elem, size))
+		return -1;
+	ring_setup(r, buf, elem, cap, size, false);
 	return 0;
 }
 
 void ring_free(struct ring *r)
 {
-	free(r->buf);
+	if (r->owned)
+		free(r->buf);
 	r->buf = NULL;
+	r->owned = false;
+}
+
+void ring_reset(struct ring *r)
+{
+	atomic_store(&r->head, 0u);
+	atomic_store(&r->tail, 0u);
+	atomic_store(&r->peak, 0u);
+	r->head_seen = 0;
+	r->tail_seen = 0;
 }
 
 bool ring_push(struct ring *r, const void *item)

@@ -9,7 +9,7 @@
 #include <string.h>
 #include <time.h>
 
-#include "mono_clock.h"
+#include "servoamp/mono_clock.h"
 
 struct sched_choice sched_decide(enum motion_policy policy,
 				 const struct sched_pstate *p, size_t np,

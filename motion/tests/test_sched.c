@@ -342,7 +342,7 @@ static int run_chain(enum motion_policy pol, uint32_t cap, const uint32_t *growt
 	return 0;
 }
 
-static int t_seed003_balance(void)
+static int t_hybrid_balance(void)
 {
 	uint32_t sh, sf, dh, df, oh, of;
 	const char *csv = getenv("SCHED_TRACE_CSV");
@@ -358,7 +358,7 @@ static int t_seed003_balance(void)
 	return 0;
 }
 
-static int t_seed003_growth_and_caps(void)
+static int t_hybrid_growth_and_caps(void)
 {
 	/* 1:N growth (curve fitting makes 4 items of each) with small queues */
 	static const uint32_t growth[NT] = { 1, 4, 1, 1, 1, 1 };
@@ -495,8 +495,8 @@ static const struct test_case cases[] = {
 	{ "rule4_tie_upstream", t_rule4_tie_upstream },
 	{ "fifo_policy", t_fifo_policy },
 	{ "random_vs_reference", t_random_vs_reference },
-	{ "seed003_balance", t_seed003_balance },
-	{ "seed003_growth_and_caps", t_seed003_growth_and_caps },
+	{ "hybrid_balance", t_hybrid_balance },
+	{ "hybrid_growth_and_caps", t_hybrid_growth_and_caps },
 };
 
 int main(int argc, char **argv)

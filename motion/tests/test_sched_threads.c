@@ -13,7 +13,7 @@
 
 #include "check.h"
 #include "motion/ring.h"
-#include "mono_clock.h"
+#include "servoamp/mono_clock.h"
 #include "scheduler.h"
 
 #define NT 6
@@ -153,7 +153,7 @@ static uint64_t run_pool(unsigned workers, struct chain *c, struct sched_stats *
 	return *elapsed;
 }
 
-static int t_pool_seed003(void)
+static int t_pool_hybrid_balance(void)
 {
 	/* struct ring is cache-line aligned: allocate with its alignment */
 	size_t csz = (sizeof(struct chain) + _Alignof(struct chain) - 1) /
@@ -210,7 +210,7 @@ static int t_pool_seed003(void)
 }
 
 static const struct test_case cases[] = {
-	{ "pool_seed003", t_pool_seed003 },
+	{ "pool_hybrid_balance", t_pool_hybrid_balance },
 };
 
 int main(int argc, char **argv)

@@ -13,7 +13,7 @@
 #include <time.h>
 
 #include "check.h"
-#include "mono_clock.h"
+#include "servoamp/mono_clock.h"
 
 static long rss_kib(void)
 {

@@ -11,7 +11,7 @@
 #include <time.h>
 
 #include "check.h"
-#include "mono_clock.h"
+#include "servoamp/mono_clock.h"
 
 /* Many short arcs along a zigzag (planning heavy), a few lines. */
 static char *gen_program(int n)

@@ -9,7 +9,7 @@ parameter and hanging the firmware on purpose (servod detects it, remoteproc
 recovers it), then writes build/demo/run.mcap, the plots in
 build/demo/plots/, prints ``servoamp info`` and where the files are.
 
-With ``--program`` the axes run seed 004's G-code program (a square and a
+With ``--program`` the axes run the squares-and-circles G-code program (a square and a
 circle, examples/seed004_squares_circles.nc) through servod's motion
 pipeline during the recording instead of the idle sines, so
 plots/xy_path.png shows the square and the circle; the firmware hang is
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--keep-logs", action="store_true", help="keep the UART logs")
     ap.add_argument("--no-fault", action="store_true", help="no firmware hang during the recording")
     ap.add_argument("--program", action="store_true",
-                    help="run seed 004's G-code program (square and circle) while recording")
+                    help="run the squares-and-circles G-code program while recording")
     args = ap.parse_args(argv)
     if args.program:
         args.no_fault = True

@@ -94,6 +94,17 @@ class Board:
         return REPO / "build" / "boards" / self.name
 
 
+def rproc_words(header: Path = REPO / "include" / "servoamp" / "rproc_words.h") -> dict[str, int]:
+    """The start/stop contract's words and offsets (``ZSR_CTRL_STOP``,
+    ``ZSR_STATUS_RUNNING``, ...) as the driver and the firmware compile
+    them: read from their one definition, include/servoamp/rproc_words.h."""
+    words = {m.group(1): int(m.group(2), 0)
+             for m in re.finditer(r"^#define\s+(ZSR_\w+)\s+(0x[0-9a-fA-F]+|\d+)\b", header.read_text(), re.M)}
+    if not words:
+        raise QemuError(f"{header}: no ZSR_ words")
+    return words
+
+
 # --------------------------------------------------------------------------
 # Images
 # --------------------------------------------------------------------------
@@ -336,15 +347,14 @@ def clock_args(board: Board, clock: str | None = None, icount: str | None = None
     return ["-icount", icount or str(c["icount"]), "-rtc", str(c["rtc"])]
 
 
-def qemu_args(board: Board, images: Images, serials: Sequence[str], accel: str | None = None,
-              clock: str | None = None, icount: str | None = None) -> list[str]:
-    """The QEMU arguments (without the binary) for a boot of ``board``.
-
-    ``serials``: one ``-serial`` value per UART, in board order; ``clock``
-    and ``icount``: see :func:`clock_args`.
-    """
+def machine_args(board: Board, serials: Sequence[str], accel: str | None = None, clock: str | None = None,
+                 icount: str | None = None) -> list[str]:
+    """The machine of ``board`` without any image: machine, CPUs, memory,
+    accelerator, time base (:func:`clock_args`) and one ``-serial`` value
+    per UART of ``serials``, in board order. Every run of the board starts
+    from these: the Linux boot (:func:`qemu_args`) and the firmware alone
+    (tests/rpu_app, its loaders in :attr:`QemuMachine.extra_args`)."""
     q = board.qemu
-    stub = board.addr("load", "boot_stub")
     args = [
         "-M", str(q["machine"]), "-smp", str(q["smp"]), "-m", str(q["memory"]),
         "-display", "none", "-nodefaults",
@@ -357,6 +367,20 @@ def qemu_args(board: Board, images: Images, serials: Sequence[str], accel: str |
     args += timebase
     for s in serials:
         args += ["-serial", s]
+    return args
+
+
+def qemu_args(board: Board, images: Images, serials: Sequence[str], accel: str | None = None,
+              clock: str | None = None, icount: str | None = None) -> list[str]:
+    """The QEMU arguments (without the binary) for a boot of ``board``.
+
+    ``serials``: one ``-serial`` value per UART, in board order; ``clock``
+    and ``icount``: see :func:`clock_args`.
+    """
+    q = board.qemu
+    stub = board.addr("load", "boot_stub")
+    args = machine_args(board, serials, accel, clock, icount)
+    timebase = clock_args(board, clock, icount)
     if timebase and images.stub_icount is None:
         raise QemuError("virtual time needs the boot stub without wfe (prepare_images builds it)")
     loads = [
@@ -506,22 +530,29 @@ class Uart:
 # --------------------------------------------------------------------------
 
 
+def connect_unix(path: Path | str, timeout: float = 10.0, what: str = "socket") -> socket.socket:
+    """Connect to a unix socket QEMU is still creating (QMP, gdbstub),
+    retrying until ``timeout``; the socket then has that timeout."""
+    deadline = time.monotonic() + timeout
+    while True:
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            sock.connect(str(path))
+            break
+        except OSError:
+            sock.close()
+            if time.monotonic() > deadline:
+                raise QemuError(f"{what} {path} did not come up") from None
+            time.sleep(0.02)
+    sock.settimeout(timeout)
+    return sock
+
+
 class Qmp:
     """A minimal QMP client (JSON lines over a unix socket)."""
 
     def __init__(self, path: Path, timeout: float = 10.0) -> None:
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-                self._sock.connect(str(path))
-                break
-            except OSError:
-                self._sock.close()
-                if time.monotonic() > deadline:
-                    raise QemuError(f"QMP socket {path} did not come up") from None
-                time.sleep(0.05)
-        self._sock.settimeout(timeout)
+        self._sock = connect_unix(path, timeout, "QMP socket")
         self._file = self._sock.makefile("rwb")
         self._read()  # greeting
         self.execute("qmp_capabilities")
@@ -569,12 +600,12 @@ class QemuMachine:
     """
 
     board: Board
-    images: Images
+    images: Images | None             # None: no Linux boot, the loaders come in extra_args
     run_dir: Path | None = None
     accel: str | None = None
     extra_args: Sequence[str] = ()
     keep_logs: bool = False
-    clock: str | None = None          # "host" (default) or "virtual": see clock_args()
+    clock: str | None = None          # "virtual" (default_clock()) or "host": see clock_args()
     icount: str | None = None         # -icount spec instead of the board's
     uarts: list[Uart] = field(default_factory=list)
     _proc: subprocess.Popen[bytes] | None = None
@@ -609,7 +640,10 @@ class QemuMachine:
                 f"socket,id=uart{i},host=127.0.0.1,port={port},server=off,nodelay=on",
             ]
             serials.append(f"chardev:uart{i}")
-        args = chardevs + qemu_args(self.board, self.images, serials, self.accel, self.clock, self.icount)
+        if self.images is not None:
+            args = chardevs + qemu_args(self.board, self.images, serials, self.accel, self.clock, self.icount)
+        else:
+            args = chardevs + machine_args(self.board, serials, self.accel, self.clock, self.icount)
         args += ["-qmp", f"unix:{qmp_path},server=on,wait=off"]
         args += list(self.extra_args)
         cmd = [binary] + args

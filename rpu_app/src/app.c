@@ -5,7 +5,7 @@
  * friction, torque constant, current limit) under a cascaded controller
  * (P position loop with velocity feed-forward and velocity limit, PI
  * velocity loop with anti-windup and current limit), closed on the FINE
- * interpolation of Linux's coarse setpoints (seed 004): each cycle's new
+ * interpolation of Linux's coarse setpoints (coarse/fine interpolation split): each cycle's new
  * coarse target is reached in SP fine_steps (4) linear sub-steps of T/4,
  * and the loops and plants run once per sub-step.
  *
@@ -54,18 +54,6 @@ static struct axis ax[AMP_MAX_AXES];
 static volatile uint32_t safestop, fault, safestops, stop_cycles, resume_req;
 static uint32_t ss_cycles;
 
-static float f_of(uint32_t w)
-{
-	union { uint32_t u; float f; } c = { .u = w };
-	return c.f;
-}
-
-static uint32_t w_of(float f)
-{
-	union { uint32_t u; float f; } c = { .f = f };
-	return c.u;
-}
-
 static float clampf(float v, float lim)
 {
 	return v > lim ? lim : (v < -lim ? -lim : v);
@@ -88,7 +76,7 @@ static int32_t to_i32(float v)
 static uint32_t default_word(const struct sp_param_desc *d)
 {
 	switch (d->type) {
-	case SP_T_F32: return w_of((float)d->def);
+	case SP_T_F32: return sp_word_from_f32((float)d->def);
 	case SP_T_I32: return (uint32_t)(int32_t)d->def;
 	default: return (uint32_t)d->def;
 	}
@@ -98,15 +86,15 @@ static void refresh(void)
 {
 	uint32_t cpr = pval[SP_P_counts_per_rev];
 
-	k.pos_kp = f_of(pval[SP_P_pos_kp]);
-	k.vel_kp = f_of(pval[SP_P_vel_kp]);
-	k.vel_ki = f_of(pval[SP_P_vel_ki]);
-	k.vel_max = f_of(pval[SP_P_vel_max]);
-	k.cur_max = f_of(pval[SP_P_cur_max]);
-	k.kt = f_of(pval[SP_P_kt]);
-	k.inv_j = 1.0f / f_of(pval[SP_P_inertia]);
-	k.friction = f_of(pval[SP_P_friction]);
-	k.decel = f_of(pval[SP_P_decel_max]);
+	k.pos_kp = sp_f32_from_word(pval[SP_P_pos_kp]);
+	k.vel_kp = sp_f32_from_word(pval[SP_P_vel_kp]);
+	k.vel_ki = sp_f32_from_word(pval[SP_P_vel_ki]);
+	k.vel_max = sp_f32_from_word(pval[SP_P_vel_max]);
+	k.cur_max = sp_f32_from_word(pval[SP_P_cur_max]);
+	k.kt = sp_f32_from_word(pval[SP_P_kt]);
+	k.inv_j = 1.0f / sp_f32_from_word(pval[SP_P_inertia]);
+	k.friction = sp_f32_from_word(pval[SP_P_friction]);
+	k.decel = sp_f32_from_word(pval[SP_P_decel_max]);
 	k.fe_max = (int32_t)pval[SP_P_fe_max];
 	k.rad_per_inc = TWO_PI / (float)cpr;
 	k.inc_per_rad = (float)cpr / TWO_PI;
@@ -142,7 +130,7 @@ int app_param_check(uint32_t id, uint32_t value)
 		return value == pval[id] ? SP_OK : SP_E_READONLY;
 	switch (d->type) {
 	case SP_T_F32: {
-		float v = f_of(value);
+		float v = sp_f32_from_word(value);
 
 		if (v != v || v < (float)d->min || v > (float)d->max)
 			return SP_E_RANGE;

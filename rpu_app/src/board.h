@@ -16,11 +16,7 @@
 #define AMP_BOARD_TICKS_PER_US BOARD_GTIMER_TICKS_PER_US
 uint32_t amp_board_ticks(void);
 
-/* Stop protocol words (board contract). */
-#define STOP_CTRL_RUN   0x00000000u
-#define STOP_CTRL_STOP  0x53544f50u	/* "STOP" */
-#define STOP_STAT_RUN   0x52554e21u	/* "RUN!" */
-#define STOP_STAT_PRKD  0x50524b44u	/* "PRKD" */
-#define STOP_STAT_CRSH  0x48535243u	/* "CRSH": firmware fault (extension) */
+/* The driver's control word and our status word: STOP, RUN!, PRKD, CRSH. */
+#include "servoamp/rproc_words.h"
 
 #endif

@@ -28,7 +28,7 @@ static volatile uint32_t in_fault;
 void fault_report(uint32_t kind, const uint32_t *frame)
 {
 	/* frame: spsr, r0..r12, return address (faulting instruction). */
-	mmio_write32(BOARD_STOP_STATUS_ADDR, STOP_STAT_CRSH);
+	mmio_write32(BOARD_STOP_STATUS_ADDR, ZSR_STATUS_CRASHED);
 	dsb();
 	if (!in_fault) {
 		in_fault = 1;
@@ -47,7 +47,7 @@ void fault_report(uint32_t kind, const uint32_t *frame)
 		log_flush();
 	}
 	for (;;) {
-		if (mmio_read32(BOARD_STOP_CONTROL_ADDR) == STOP_CTRL_STOP) {
+		if (mmio_read32(BOARD_STOP_CONTROL_ADDR) == ZSR_CTRL_STOP) {
 			in_fault = 0;
 			servo_quiesce_and_park();
 		}

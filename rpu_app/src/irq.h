@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 /*
- * Interrupt descriptor table (seed 002): one descriptor per GIC interrupt
+ * Interrupt descriptor table: one descriptor per GIC interrupt
  * ID with a handler, a clear function (clears the flag at the source) and
  * the trigger type; registered at init, dispatched by irq_dispatch().
  *

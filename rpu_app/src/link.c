@@ -3,7 +3,7 @@
  * link.c - the firmware's side of the exchange with Linux, through amp_lib
  * (amp/amp.h) and the application protocol (servoamp/servo_proto.h).
  *
- * Cycle interrupt (link_cycle, seed 000's servo steps; the dispatcher
+ * Cycle interrupt (link_cycle, the servo's steps of the periodic exchange; the dispatcher
  * clears the interrupt flag after the handler):
  *   1. heartbeat, Linux's state and epoch, watchdog   amp_servo_cycle_rx()
  *   2. poll the semaphore, at most RX_TIMEOUT_US

@@ -153,7 +153,7 @@ static void print_stats(void)
 
 static int stop_requested(void)
 {
-	return mmio_read32(BOARD_STOP_CONTROL_ADDR) == STOP_CTRL_STOP;
+	return mmio_read32(BOARD_STOP_CONTROL_ADDR) == ZSR_CTRL_STOP;
 }
 
 __attribute__((noreturn)) void servo_quiesce_and_park(void)
@@ -166,7 +166,7 @@ __attribute__((noreturn)) void servo_quiesce_and_park(void)
 		   (unsigned)cycles, (void *)(uintptr_t)BOARD_PARK_ADDR);
 	log_flush();
 	/* Caches cleaned and MMU off inside cpu_park (cpu.S), then PRKD. */
-	cpu_park(BOARD_PARK_ADDR, BOARD_STOP_STATUS_ADDR, STOP_STAT_PRKD);
+	cpu_park(BOARD_PARK_ADDR, BOARD_STOP_STATUS_ADDR, ZSR_STATUS_PARKED);
 }
 
 static void banner(void)
@@ -250,7 +250,7 @@ __attribute__((noreturn)) void servo_main(void)
 		   (unsigned)(BOARD_CYCLE_PS_EN ? 2u << BOARD_CYCLE_PS_V : 1u),
 		   (unsigned)BOARD_NEST_TEST_SGI, (unsigned)BOARD_NEST_TEST_PRIORITY);
 
-	mmio_write32(BOARD_STOP_STATUS_ADDR, STOP_STAT_RUN);
+	mmio_write32(BOARD_STOP_STATUS_ADDR, ZSR_STATUS_RUNNING);
 	dsb();
 	log_printf("running: status %p = RUN!, polling stop word %p\n",
 		   (void *)(uintptr_t)BOARD_STOP_STATUS_ADDR, (void *)(uintptr_t)BOARD_STOP_CONTROL_ADDR);

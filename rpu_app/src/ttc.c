@@ -25,21 +25,8 @@
  */
 #include "arch.h"
 #include "board.h"
+#include "servoamp/cadence_ttc.h"
 #include "ttc.h"
-
-#define TTC_CLK_CTRL(n)  (0x00u + 4u * (n))
-#define TTC_CNT_CTRL(n)  (0x0cu + 4u * (n))
-#define TTC_CNT_VAL(n)   (0x18u + 4u * (n))
-#define TTC_INTERVAL(n)  (0x24u + 4u * (n))
-#define TTC_ISR(n)       (0x54u + 4u * (n))
-#define TTC_IER(n)       (0x60u + 4u * (n))
-
-#define CLK_PS_EN       (1u << 0)
-#define CNT_DIS         (1u << 0)
-#define CNT_INTERVAL    (1u << 1)
-#define CNT_RST         (1u << 4)
-#define CNT_WAVE_DIS    (1u << 5)
-#define INT_INTERVAL    (1u << 0)
 
 #define N BOARD_CYCLE_COUNTER
 #define L BOARD_LINUX_CYCLE_COUNTER
@@ -52,11 +39,12 @@ static uint32_t period_ns;
 int ttc_setting(uint32_t period_us, struct ttc_setting *s)
 {
 	for (int ps = -1; ps < 16; ps++) {
-		uint64_t div = ps < 0 ? 1u : 2ull << ps;
+		uint32_t clk = ps < 0 ? 0u : TTC_CLK_PS(ps);
+		uint64_t div = ttc_clk_div(clk);
 		uint64_t ticks = ((uint64_t)BOARD_TTC_HZ * period_us + div * 500000u) / (div * 1000000u);
 
 		if (ticks >= 2u && ticks <= 0x10000u) {
-			s->clk = ps < 0 ? 0u : (CLK_PS_EN | ((uint32_t)ps << 1));
+			s->clk = clk;
 			s->interval = (uint32_t)ticks - 1u;
 			s->ns_per_tick_q16 = (uint32_t)((div * 1000000000ull * 65536u + BOARD_TTC_HZ / 2u) / BOARD_TTC_HZ);
 			s->period_ns = (uint32_t)(ticks * div * 1000000000ull / BOARD_TTC_HZ);
@@ -68,7 +56,7 @@ int ttc_setting(uint32_t period_us, struct ttc_setting *s)
 
 static void counter_off(uint32_t n)
 {
-	mmio_write32(REG(TTC_CNT_CTRL(n)), CNT_DIS | CNT_WAVE_DIS);
+	mmio_write32(REG(TTC_CNT_CTRL(n)), TTC_CNT_DIS | TTC_CNT_WAVE_DIS);
 	mmio_write32(REG(TTC_IER(n)), 0);
 	(void)mmio_read32(REG(TTC_ISR(n)));
 }
@@ -90,14 +78,14 @@ int ttc_cycle_start(uint32_t period_us)
 
 		mmio_write32(REG(TTC_CLK_CTRL(c)), s.clk);
 		mmio_write32(REG(TTC_INTERVAL(c)), s.interval);
-		mmio_write32(REG(TTC_IER(c)), INT_INTERVAL);
+		mmio_write32(REG(TTC_IER(c)), TTC_INT_INTERVAL);
 	}
 	/* Linux's counter first; this core's half a period later. */
-	mmio_write32(REG(TTC_CNT_CTRL(L)), CNT_INTERVAL | CNT_RST | CNT_WAVE_DIS);
+	mmio_write32(REG(TTC_CNT_CTRL(L)), TTC_CNT_INTERVAL | TTC_CNT_RST | TTC_CNT_WAVE_DIS);
 	for (uint32_t i = 0; i < 10000000u; i++)
-		if ((mmio_read32(REG(TTC_CNT_VAL(L))) & 0xffffu) >= s.interval / 2u)
+		if ((mmio_read32(REG(TTC_CNT_VAL(L))) & TTC_CNT_MASK) >= s.interval / 2u)
 			break;
-	mmio_write32(REG(TTC_CNT_CTRL(N)), CNT_INTERVAL | CNT_RST | CNT_WAVE_DIS);
+	mmio_write32(REG(TTC_CNT_CTRL(N)), TTC_CNT_INTERVAL | TTC_CNT_RST | TTC_CNT_WAVE_DIS);
 	irq_restore(flags);
 	return 0;
 }
@@ -121,7 +109,7 @@ void ttc_cycle_clear(void *arg)
 
 uint32_t ttc_cycle_since_fire_ns(void *arg)
 {
-	uint32_t ticks = mmio_read32(REG(TTC_CNT_VAL(N))) & 0xffffu;
+	uint32_t ticks = mmio_read32(REG(TTC_CNT_VAL(N))) & TTC_CNT_MASK;
 
 	(void)arg;
 	return (uint32_t)(((uint64_t)ticks * (ns_per_tick_q16 ? ns_per_tick_q16 : BOARD_CYCLE_NS_PER_TICK_Q16)) >> 16);

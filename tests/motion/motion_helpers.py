@@ -16,6 +16,7 @@ TEST_BINARIES = (
     "test_gcode",
     "test_motion",
     "test_plan",
+    "test_ring",
     "test_sched",
     "test_sched_threads",
     "test_stream",

@@ -18,7 +18,7 @@ TESTS = ROOT / "motion" / "tests"
 
 def build(out: Path, test: str) -> None:
     cmd = ["gcc", "-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra", "-Werror", "-O1",
-           f"-I{ROOT / 'motion' / 'include'}", f"-I{SRC}", f"-I{TESTS}",
+           f"-I{ROOT / 'motion' / 'include'}", f"-I{SRC}", f"-I{TESTS}", f"-I{ROOT / 'include'}",
            *[str(p) for p in sorted(SRC.glob("*.c")) if p.name != "cli.c"],
            str(TESTS / "check.c"), str(TESTS / test), "-lpthread", "-lm", "-o", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)

@@ -1,6 +1,6 @@
 """The motion pipeline drives the emulated controller (one QEMU boot).
 
-servod runs G-code through libmotion (``ampctl run``): the seed 004 program
+servod runs G-code through libmotion (``ampctl run``): the squares-and-circles program
 (examples/seed004_squares_circles.nc: a 20 mm square with G1, a 10 mm circle
 with G2 then G3, 1500-3000 mm/min) runs end to end while
 ``servoamp record`` records every cycle; servod's own path-error figures
@@ -44,7 +44,7 @@ from servoamp.record import RecordResult, record
 
 pytestmark = pytest.mark.board
 
-SEED004 = "/usr/share/servoamp/examples/seed004_squares_circles.nc"
+SQUARES_CIRCLES = "/usr/share/servoamp/examples/seed004_squares_circles.nc"
 END = (0, 0, 0)                 # the program's end point, increments
 PATH_ERR_MAX_UM = 60.0
 FOLLOW_ERR_MAX_UM = 300.0
@@ -95,7 +95,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         time.sleep(0.5)
         out["bad_st2"] = _status(cb)
 
-        # 2. the seed 004 program, recorded
+        # 2. the squares-and-circles program, recorded
         # recorded until the program is done (its length in host time grows
         # with the cycles the host makes the guest miss), not for a fixed time
         box: dict[str, RecordResult] = {}
@@ -104,8 +104,8 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
             r=record("127.0.0.1", cb.host_port, out["path"], RECORD_MAX_S, stop=stop_rec)))
         th.start()
         time.sleep(0.5)
-        out["run_rc"], out["run_out"] = cb.sh_rc(f"ampctl run {SEED004} 2>&1", timeout=30)
-        out["busy_rc"], out["busy_out"] = cb.sh_rc(f"ampctl run {SEED004} 2>&1", timeout=30)
+        out["run_rc"], out["run_out"] = cb.sh_rc(f"ampctl run {SQUARES_CIRCLES} 2>&1", timeout=30)
+        out["busy_rc"], out["busy_out"] = cb.sh_rc(f"ampctl run {SQUARES_CIRCLES} 2>&1", timeout=30)
         out["done_st"] = _wait_state(cb, {"done", "fault", "stopped"}, 30)
         out["t_done"] = time.monotonic() - t0
         time.sleep(0.5)
@@ -117,7 +117,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         out["res"] = box["r"]
 
         # 3. ampctl stop in the middle of the square: decelerate along the path, hold
-        cb.ampctl(f"run {SEED004}")
+        cb.ampctl(f"run {SQUARES_CIRCLES}")
         time.sleep(1.5)
         out["before_stop"] = _status(cb)
         out["stop_out"] = cb.ampctl("stop")
@@ -148,7 +148,7 @@ def test_malformed_program_refused_and_holding(run: dict[str, Any]) -> None:
     assert all(abs(x - y) <= 3 for x, y in zip(a2, c)), (a2, c)
 
 
-def test_seed004_runs_to_the_end_point(run: dict[str, Any]) -> None:
+def test_squares_circles_runs_to_the_end_point(run: dict[str, Any]) -> None:
     print("\n" + run["run_out"])
     assert run["run_rc"] == 0, run["run_out"]
     assert "checked" in run["run_out"] and "end X0.0000 Y0.0000 Z0.0000" in run["run_out"]
@@ -168,7 +168,7 @@ def test_seed004_runs_to_the_end_point(run: dict[str, Any]) -> None:
 
 def test_path_error_within_bounds(run: dict[str, Any]) -> None:
     s, st = run["stats"], run["done_st"]
-    print(f"\nseed 004 on the board: path error max {s['motion.path_err.max_um']} um "
+    print(f"\nsquares and circles on the board: path error max {s['motion.path_err.max_um']} um "
           f"(line {s['motion.path_err.max_line']}), rms {s['motion.path_err.rms_um']} um; "
           f"following error max {s['motion.follow_err.max_um']} um "
           f"(line {s['motion.follow_err.max_line']}), rms {s['motion.follow_err.rms_um']} um; "
@@ -255,5 +255,5 @@ def test_recording_shows_the_square_and_the_circle(run: dict[str, Any]) -> None:
     assert xy.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and xy.stat().st_size > 10_000
     dest = qemu.REPO / "build" / "test-artifacts"
     dest.mkdir(parents=True, exist_ok=True)
-    (dest / "seed004_xy_path.png").write_bytes(xy.read_bytes())
-    print(f"\nXY plot: {dest / 'seed004_xy_path.png'}")
+    (dest / "squares_circles_xy_path.png").write_bytes(xy.read_bytes())
+    print(f"\nXY plot: {dest / 'squares_circles_xy_path.png'}")

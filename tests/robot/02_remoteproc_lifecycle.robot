@@ -60,9 +60,9 @@ Fifty Stop Start Cycles In One Boot
     ${script}=    Catenate    SEPARATOR=${SPACE}
     ...    ok=0; bad=0; for i in $(seq ${CYCLES}); do
     ...    if echo start > ${RPROC}/state && [ "$(cat ${RPROC}/state)" = running ]
-    ...    && [ "$(devmem ${STATUS_WORD} 32)" = 0x52554E21 ]
+    ...    && [ "$(devmem ${STATUS_WORD} 32)" = ${RUNNING_HEX} ]
     ...    && echo stop > ${RPROC}/state && [ "$(cat ${RPROC}/state)" = offline ]
-    ...    && [ "$(devmem ${STATUS_WORD} 32)" = 0x50524B44 ];
+    ...    && [ "$(devmem ${STATUS_WORD} 32)" = ${PARKED_HEX} ];
     ...    then ok=$((ok+1)); else bad=$((bad+1)); echo "cycle $i failed"; fi; done;
     ...    echo "cycles ok=$ok bad=$bad"
     ${t0}=    Evaluate    time.time()    modules=time

@@ -106,3 +106,26 @@ def test_network_entry_agrees(board: qemu.Board) -> None:
     header = (REPO / "linux" / "telemetry" / "telem.h").read_text()
     m = re.search(r"#define TELEM_DEFAULT_PORT (\d+)u", header)
     assert m and int(m.group(1)) == net["telemetry_port"]
+
+
+def test_rproc_words_defined_once() -> None:
+    """The control and status words (STOP, RUN!, PRKD, CRSH) have one
+    definition, include/servoamp/rproc_words.h, which the driver, rpu_app
+    and the test firmware include; no source holds their numbers again
+    (documentation may quote them)."""
+    words = qemu.rproc_words()
+    ascii_of = {"ZSR_CTRL_STOP": b"STOP", "ZSR_STATUS_RUNNING": b"RUN!", "ZSR_STATUS_PARKED": b"PRKD",
+                "ZSR_STATUS_CRASHED": b"HSRC"}  # CRSH: "CRSH" in (little-endian) memory
+    for name, text in ascii_of.items():
+        assert words[name] == int.from_bytes(text, "big"), name
+    header = "include/servoamp/rproc_words.h"
+    for user in ("linux/remoteproc/zynq_servo_rproc.c", "rpu_app/src/board.h", "tests/robot/fixtures/test_fw.S"):
+        assert '#include "servoamp/rproc_words.h"' in (REPO / user).read_text(), user
+    numbers = re.compile("|".join(f"{words[n]:#010x}" for n in ascii_of), re.I)
+    files = subprocess.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True, check=True).stdout.split()
+    docs = ("docs/", "devicetree/bindings/")
+    found = [f"{f}:{n}" for f in files
+             if f != header and not f.startswith(docs) and not f.endswith(".md") and (REPO / f).is_file()
+             for n, line in enumerate((REPO / f).read_text(errors="replace").splitlines(), 1)
+             if numbers.search(line)]
+    assert not found, f"the words again outside {header}: {found}"

@@ -17,6 +17,8 @@ REPO = HERE.parents[1]
 BOARD = "zynq7000_qemu"
 sys.path.insert(0, str(HERE))
 
+from servoamp.qemu import rproc_words  # noqa: E402
+
 # The board contract (fixed numbers shared with the Linux/remoteproc side).
 CONTRACT = {
     "BOARD_CARVEOUT_BASE": 0x1F000000,
@@ -36,7 +38,11 @@ CONTRACT = {
     "BOARD_GICC_BASE": 0xF8F00100,
     "BOARD_GTIMER_BASE": 0xF8F00200,
 }
-STOP, RUN, PRKD, CRSH = 0x53544F50, 0x52554E21, 0x50524B44, 0x48535243
+# The driver's control word and the firmware's status words, from their one
+# definition (include/servoamp/rproc_words.h).
+_WORDS = rproc_words()
+STOP, RUN, PRKD, CRSH = (_WORDS[k] for k in ("ZSR_CTRL_STOP", "ZSR_STATUS_RUNNING", "ZSR_STATUS_PARKED",
+                                              "ZSR_STATUS_CRASHED"))
 
 
 def parse_board_config(path: Path) -> dict[str, int]:
@@ -76,10 +82,9 @@ def board_cfg(rpu_build) -> dict[str, int]:
 
 def qemu_ok() -> str | None:
     """None when the project's QEMU is there (built on first use), else why not."""
-    from qemu_rpu import qemu_binary
-    from servoamp.qemu import QemuError
+    from servoamp import qemu
     try:
-        qemu_binary()
-    except QemuError as e:
+        qemu.check_qemu(qemu.Board.load(BOARD))
+    except qemu.QemuError as e:
         return f"no usable QEMU: {e}"
     return None

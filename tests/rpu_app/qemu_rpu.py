@@ -1,60 +1,38 @@
 # SPDX-License-Identifier: MIT
-"""QEMU harness for rpu_app without Linux (tests/rpu_app).
+"""rpu_app without Linux (tests/rpu_app), on the project's one QEMU
+launcher (servoamp.qemu): the board's machine and time base (machine_args:
+virtual time by default, SERVOAMP_CLOCK=host for the host clock), its
+UARTs, QMP and the monitor commands come from QemuMachine; this file adds
+only what the firmware alone needs:
 
-Runs `qemu-system-arm -M xilinx-zynq-a9 -smp 2 -m 512M` with:
   - CPU0 in the test stub (build/rpu_app/<board>/qemu-stub.elf): it enables
     the GIC distributor and the global timer (what Linux would have done)
     and sleeps; the stub also holds the CPU1 park loop at the contract
     address;
-  - CPU1 started directly at the firmware entry (-device loader,cpu-num=1);
-  - UART1 (-serial #1) written to a file, UART0 discarded;
-  - the HMP monitor and the gdbstub on unix sockets in the test's temporary
-    directory (nothing listens on a network port).
-
-GdbRemote is a minimal GDB remote-serial-protocol client: the only way to
-WRITE guest physical memory from outside (HMP has no write command), used
-to post the driver's STOP word exactly as the Linux driver would.
+  - CPU1 started in the park loop, released to the firmware entry by the
+    stub (-device loader, as the remoteproc driver does on the board);
+  - the gdbstub on a unix socket in the test's temporary directory: GdbRemote
+    is a minimal GDB remote-serial-protocol client, the only way to WRITE
+    guest physical memory from outside (the monitor has no write command),
+    used to post the driver's STOP word exactly as the Linux driver would.
 """
 from __future__ import annotations
 
-import os
 import re
-import shutil
-import socket
-import subprocess
 import time
 from pathlib import Path
 
+from servoamp import qemu
 
-
-def qemu_binary() -> str:
-    """The same QEMU as every board run: the project's own build
-    (servoamp.qemu.check_qemu; $SERVOAMP_QEMU overrides it)."""
-    from servoamp import qemu
-    return qemu.check_qemu(qemu.Board.load("zynq7000_qemu"))
-
-
-def _connect_unix(path: str, timeout: float) -> socket.socket:
-    """Connect to a unix socket QEMU is still creating, retrying until timeout."""
-    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    s.settimeout(timeout)
-    deadline = time.monotonic() + timeout
-    while True:
-        try:
-            s.connect(path)
-            return s
-        except (FileNotFoundError, ConnectionRefusedError):
-            if time.monotonic() > deadline:
-                s.close()
-                raise
-            time.sleep(0.02)
+BOARD = "zynq7000_qemu"
+SERVO_UART = 1          # UART1: the firmware's console (board.yaml qemu.uarts)
 
 
 class GdbRemote:
     """Minimal GDB RSP client over a unix socket (acks on)."""
 
     def __init__(self, path: str, timeout: float = 5.0):
-        self.s = _connect_unix(path, timeout)
+        self.s = qemu.connect_unix(path, timeout, "gdbstub socket")
         self.buf = b""
         self.running = False
         # QEMU stops the VM when a debugger attaches; ask why (sync point).
@@ -149,49 +127,6 @@ class GdbRemote:
         return int.from_bytes(bytes.fromhex(r), "little")
 
 
-class Hmp:
-    """HMP monitor over a unix socket."""
-
-    PROMPT = b"(qemu) "
-
-    def __init__(self, path: str, timeout: float = 5.0):
-        self.s = _connect_unix(path, timeout)
-        self._until_prompt()
-
-    def _until_prompt(self) -> str:
-        buf = b""
-        while not buf.endswith(self.PROMPT):
-            d = self.s.recv(4096)
-            if not d:
-                raise ConnectionError("monitor closed")
-            buf += d
-        return buf[: -len(self.PROMPT)].decode(errors="replace")
-
-    def cmd(self, line: str) -> str:
-        self.s.sendall(line.encode() + b"\n")
-        out = self._until_prompt()
-        # drop the echoed command line (HMP echoes with terminal escapes)
-        return out.split("\n", 1)[1] if "\n" in out else ""
-
-    def xp32(self, addr: int) -> int:
-        out = self.cmd(f"xp /1wx {addr:#x}")
-        m = re.search(r":\s*0x([0-9a-fA-F]+)", out)
-        if not m:
-            raise RuntimeError(f"xp parse: {out!r}")
-        return int(m.group(1), 16)
-
-    def cpu_pc(self, cpu_index: int) -> int:
-        self.cmd(f"cpu {cpu_index}")
-        out = self.cmd("info registers")
-        m = re.search(r"R15=([0-9a-fA-F]{8})", out)
-        if not m:
-            raise RuntimeError(f"info registers parse: {out!r}")
-        return int(m.group(1), 16)
-
-    def close(self):
-        self.s.close()
-
-
 def _elf_entry(path: Path) -> int:
     from elftools.elf.elffile import ELFFile
 
@@ -211,23 +146,15 @@ def _symbol(path: Path, name: str) -> int:
 
 
 class QemuRpu:
+    """One QEMU run of the firmware alone, as a context manager."""
+
     def __init__(self, workdir: Path, stub: Path, firmware: Path, extra: list[str] | None = None):
         self.dir = Path(workdir)
         self.dir.mkdir(parents=True, exist_ok=True)
-        self.uart1 = self.dir / "uart1.log"
-        self.mon_path = str(self.dir / "mon.sock")
-        self.gdb_path = str(self.dir / "gdb.sock")
-        for p in (self.uart1, Path(self.mon_path), Path(self.gdb_path)):
-            if p.exists():
-                p.unlink()
-        self.argv = [
-            qemu_binary(), "-M", "xilinx-zynq-a9", "-smp", "2", "-m", "512M",
-            "-display", "none", "-nodefaults",
-            "-chardev", "null,id=uart0",
-            "-chardev", f"file,id=uart1,path={self.uart1}",
-            "-serial", "chardev:uart0", "-serial", "chardev:uart1",
-            "-chardev", f"socket,id=mon,path={self.mon_path},server=on,wait=off",
-            "-mon", "chardev=mon,mode=readline",
+        self.gdb_path = self.dir / "gdb.sock"
+        if self.gdb_path.exists():
+            self.gdb_path.unlink()
+        loaders = [
             "-chardev", f"socket,id=gdb,path={self.gdb_path},server=on,wait=off",
             "-gdb", "chardev:gdb",
             # CPU0 runs the stub; CPU1 waits in the park loop until CPU0 has
@@ -238,71 +165,67 @@ class QemuRpu:
             "-device", f"loader,addr={_symbol(stub, 'park_loop'):#x},cpu-num=1",
             "-device", f"loader,addr={_symbol(stub, 'stub_fw_entry'):#x},"
                        f"data={_elf_entry(firmware):#x},data-len=4",
-        ] + (extra or [])
-        self.proc: subprocess.Popen | None = None
-        self.hmp: Hmp | None = None
+        ]
+        self.machine = qemu.QemuMachine(qemu.Board.load(BOARD), None, run_dir=self.dir, keep_logs=True,
+                                        extra_args=loaders + (extra or []))
         self.gdb: GdbRemote | None = None
-        self.t0 = 0.0
 
-    def start(self):
-        self.stderr = open(self.dir / "qemu.stderr", "w")
-        self.proc = subprocess.Popen(self.argv, stdin=subprocess.DEVNULL,
-                                     stdout=self.stderr, stderr=subprocess.STDOUT)
-        self.t0 = time.monotonic()
-        self.hmp = Hmp(self.mon_path)
+    def start(self) -> QemuRpu:
+        self.machine.start()
         return self
 
     def attach_gdb(self) -> GdbRemote:
         if self.gdb is None:
-            self.gdb = GdbRemote(self.gdb_path)
+            self.gdb = GdbRemote(str(self.gdb_path))
         return self.gdb
 
     def uart_text(self) -> str:
-        try:
-            return self.uart1.read_text(errors="replace").replace("\r", "")
-        except FileNotFoundError:
-            return ""
+        """Everything UART1 printed so far."""
+        return self.machine.uart(SERVO_UART).output
 
     def wait_uart(self, pattern: str, timeout: float = 5.0, count: int = 1) -> list[re.Match]:
+        """The first ``count`` matches of ``pattern`` in all of UART1's output
+        (from the start, not from a cursor), waiting up to ``timeout``."""
         rx = re.compile(pattern, re.M)
         deadline = time.monotonic() + timeout
         while True:
             found = list(rx.finditer(self.uart_text()))
             if len(found) >= count:
                 return found
-            if self.proc.poll() is not None:
-                raise RuntimeError(f"QEMU exited ({self.proc.returncode}); UART1:\n{self.uart_text()}")
+            if not self.machine.running:
+                raise RuntimeError(f"QEMU exited; UART1:\n{self.uart_text()}")
             if time.monotonic() > deadline:
                 raise TimeoutError(f"{pattern!r} x{count} not on UART1 after {timeout}s:\n{self.uart_text()[-3000:]}")
             time.sleep(0.02)
 
+    def read_word(self, addr: int) -> int:
+        return self.machine.read_word(addr)
+
     def wait_word(self, addr: int, value: int, timeout: float = 5.0) -> float:
-        deadline = time.monotonic() + timeout
-        t = time.monotonic()
-        while True:
-            v = self.hmp.xp32(addr)
-            if v == value:
-                return time.monotonic() - t
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"[{addr:#x}] = {v:#010x}, wanted {value:#010x}")
-            time.sleep(0.005)
+        """Poll a word until it equals ``value``; the host seconds it took."""
+        return self.machine.wait_word(addr, value, timeout=timeout, interval=0.005)
 
-    def stop(self):
-        for c in (self.gdb, self.hmp):
-            if c is not None:
-                try:
-                    c.close()
-                except OSError:
-                    pass
-        self.gdb = self.hmp = None
-        if self.proc and self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(timeout=5)
-        if getattr(self, "stderr", None):
-            self.stderr.close()
+    def monitor(self, command: str) -> str:
+        return self.machine.hmp(command)
 
-    def __enter__(self):
+    def cpu_pc(self, cpu_index: int) -> int:
+        out = self.machine.hmp("info registers", cpu=cpu_index)
+        m = re.search(r"R15=([0-9a-fA-F]{8})", out)
+        if not m:
+            raise RuntimeError(f"info registers parse: {out!r}")
+        return int(m.group(1), 16)
+
+    def stop(self) -> None:
+        if self.gdb is not None:
+            try:
+                self.gdb.close()
+            except OSError:
+                pass
+            self.gdb = None
+        self.machine.stop()
+
+    def __enter__(self) -> QemuRpu:
         return self.start()
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc) -> None:
         self.stop()

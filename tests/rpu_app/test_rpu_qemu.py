@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: MIT
 """rpu_app in QEMU without Linux (xilinx-zynq-a9, -smp 2, CPU1 runs the
-firmware, CPU0 holds in the test stub). Guest memory is written through the
-gdbstub (the driver's STOP word, the boot register), read through the HMP
-monitor; UART1 goes to a file. Each QEMU run stays under ~20 s wall time."""
+firmware, CPU0 holds in the test stub), on the project's QEMU launcher
+(qemu_rpu.py: virtual time by default). Guest memory is written through the
+gdbstub (the driver's STOP word, the boot register), read through the
+monitor. Each QEMU run stays under ~20 s wall time."""
 from __future__ import annotations
 
 import re
@@ -59,7 +60,7 @@ def request_start(q, cfg, entry):
 def read_trace(q, cfg, tmp_path) -> bytes:
     out = tmp_path / "trace.bin"
     base = cfg["BOARD_CARVEOUT_BASE"] + cfg["BOARD_CARVEOUT_SIZE"] - cfg["BOARD_UNCACHED_SIZE"]
-    q.hmp.cmd(f'pmemsave {base:#x} {cfg["BOARD_TRACE_SIZE"]:#x} "{out}"')
+    q.monitor(f'pmemsave {base:#x} {cfg["BOARD_TRACE_SIZE"]:#x} "{out}"')
     return out.read_bytes()
 
 
@@ -71,7 +72,7 @@ def test_boot_cycle_irq_stats_and_trace(rpu_build, board_cfg, tmp_path):
         assert first.startswith("servoamp rpu_app "), first
         assert re.match(r"servoamp rpu_app \d+\.\d+\.\d+ \(\S+, built \S+, gcc [^)]+\) board=zynq7000_qemu "
                         r"variant=servo \(resource table: trace\)$", first), first
-        assert q.hmp.xp32(board_cfg["BOARD_STOP_STATUS_ADDR"]) == RUN
+        assert q.read_word(board_cfg["BOARD_STOP_STATUS_ADDR"]) == RUN
         assert "mmu=on" in text
 
         stats = q.wait_uart(STATS_RE, timeout=12, count=2)
@@ -140,10 +141,10 @@ def test_stop_park_restart_50_times(rpu_build, board_cfg, tmp_path):
             time.sleep(0.02)  # let it run ~20 cycles
             request_stop(q, board_cfg)
             stop_times.append(q.wait_word(status, PRKD, timeout=3))
-            pc = q.hmp.cpu_pc(1)
+            pc = q.cpu_pc(1)
             assert lo <= pc < hi, f"stop {i}: CPU1 at {pc:#010x}, not in the park loop {lo:#x}..{hi:#x}"
             time.sleep(0.005)
-            assert q.hmp.cpu_pc(1) in range(lo, hi), "CPU1 left the park loop with a zero boot register"
+            assert q.cpu_pc(1) in range(lo, hi), "CPU1 left the park loop with a zero boot register"
             request_start(q, board_cfg, entry)
             q.wait_word(status, RUN, timeout=3)
         q.wait_uart(r"^running:", count=n + 1, timeout=5)
@@ -199,4 +200,4 @@ def test_mmu_off_build_runs_and_parks(tmp_path, board_cfg):
         request_stop(q, board_cfg)
         q.wait_word(status, PRKD, timeout=3)
         lo, hi = park_range(b)
-        assert lo <= q.hmp.cpu_pc(1) < hi
+        assert lo <= q.cpu_pc(1) < hi

@@ -31,7 +31,7 @@
 #define AMP_OCM_VERSION 1u
 #define AMP_FRAME_MAGIC 0x46504d41u	/* "AMPF" */
 
-/* Inter-core semaphore values (seed 000): 1 = idle, 0 = busy. */
+/* Inter-core semaphore values (the mailbox and the periodic exchange): 1 = idle, 0 = busy. */
 #define AMP_SEM_IDLE 1u	/* token with the requester (Linux) */
 #define AMP_SEM_BUSY 0u	/* token with the responder (servo) */
 

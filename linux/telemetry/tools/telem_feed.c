@@ -27,6 +27,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "servoamp/mono_clock.h"
 #include "telem.h"
 
 static volatile sig_atomic_t stop_flag;
@@ -160,13 +161,13 @@ int main(int argc, char **argv)
 	fflush(stdout);
 
 	if (o.wait_clients) {
-		uint64_t end = telem_now_ns() + (uint64_t)(o.wait_timeout * 1e9);
+		uint64_t end = mono_now_ns() + (uint64_t)(o.wait_timeout * 1e9);
 
 		for (;;) {
 			telem_get_stats(&t, &st);
 			if (st.clients >= o.wait_clients || stop_flag)
 				break;
-			if (telem_now_ns() > end) {
+			if (mono_now_ns() > end) {
 				fprintf(stderr, "telem_feed: no client after %.1f s\n", o.wait_timeout);
 				telem_destroy(&t);
 				return 3;
@@ -193,7 +194,7 @@ int main(int argc, char **argv)
 			while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, NULL) == EINTR && !stop_flag)
 				;
 		}
-		t_now = telem_now_ns();
+		t_now = mono_now_ns();
 		if (o.restart_at && cyc == o.start_cycle + o.restart_at) {
 			/* the servo restarted: its counter starts again; servod marks it */
 			telem_push_gap(&t, t_now, cyc, cyc, 0, TELEM_GAP_CONTROLLER_RESTART);

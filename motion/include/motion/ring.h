@@ -3,7 +3,13 @@
  * Bounded single-producer single-consumer ring buffer of fixed-size items.
  * Rule 1 of the hybrid scheduler (a task never runs on two cores at once)
  * makes every queue of the chain SPSC, so C11 acquire/release atomics are
- * enough.  Storage is allocated once in ring_init().
+ * enough.
+ *
+ * The one SPSC ring of the repository: the motion pipeline's queues,
+ * servod's setpoint queue (program runner to cycle thread) and the
+ * telemetry transport's cycle records (cycle thread to drain thread) all
+ * use it.  Storage is allocated by ring_init() or given by the caller
+ * (ring_init_buf(), no allocation).
  *
  * Layout for two cores: the producer's index (tail) and the consumer's
  * index (head) live on separate cache lines, and each side keeps a private
@@ -23,6 +29,14 @@
 
 #define RING_CACHELINE 64
 
+/* Slot size for items of `elem` bytes: elem, or whole cache lines for items
+ * of more than half a line (see struct ring's stride). */
+#define RING_STRIDE(elem) \
+	((elem) > RING_CACHELINE / 2 ? ((elem) + RING_CACHELINE - 1) / RING_CACHELINE * RING_CACHELINE : (elem))
+/* Bytes of caller storage ring_init_buf() needs for `slots` items (`slots`
+ * a power of two). */
+#define RING_BUF_BYTES(elem, slots) ((size_t)(slots) * RING_STRIDE(elem))
+
 struct ring {
 	/* read-only after ring_init() */
 	unsigned char *buf;
@@ -34,6 +48,7 @@ struct ring {
 			      takes half a line) */
 	uint32_t cap;      /* logical capacity, items */
 	uint32_t mask;     /* storage size - 1 (power of two >= cap) */
+	bool owned;        /* buf allocated by ring_init(), freed by ring_free() */
 	/* producer side */
 	_Alignas(RING_CACHELINE) _Atomic uint32_t tail; /* free running */
 	uint32_t head_seen; /* producer's copy of head (may lag) */
@@ -49,7 +64,14 @@ int ring_init(struct ring *r, size_t elem, uint32_t cap);
  * been consumed, so a consumer may hand out references to consumed items
  * (ring_front_pos(), ring_at()) that stay valid for that long. */
 int ring_init_slots(struct ring *r, size_t elem, uint32_t cap, uint32_t slots);
+/* Like ring_init(), in the caller's storage: `buf` aligned to
+ * RING_CACHELINE, at least RING_BUF_BYTES(elem, n) bytes where n is cap
+ * rounded up to a power of two. -1 if it is not. */
+int ring_init_buf(struct ring *r, void *buf, size_t bytes, size_t elem, uint32_t cap);
+/* Frees what ring_init() allocated (nothing for ring_init_buf()). */
 void ring_free(struct ring *r);
+/* Empty it; only while neither side uses it. */
+void ring_reset(struct ring *r);
 
 /* Any thread (the scheduler's level functions, statistics). */
 static inline uint32_t ring_count(const struct ring *r)

@@ -19,6 +19,7 @@ from servoamp.qemu import (
     boot_to_shell,
     default_clock,
     prepare_images,
+    rproc_words,
     run_shell,
 )
 
@@ -241,6 +242,12 @@ class EmulatedBoard:
         if self._images is None:
             raise QemuError("no images (Build Images)")
         return any(p.name == firmware for p in self._images.firmware)
+
+    @keyword
+    def rproc_word(self, name: str) -> int:
+        """A word of the start/stop contract, e.g. ``Rproc Word  ZSR_STATUS_PARKED``
+        (include/servoamp/rproc_words.h)."""
+        return rproc_words()[name]
 
     @keyword
     def board_value(self, *keys: str) -> Any:

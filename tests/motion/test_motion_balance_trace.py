@@ -1,4 +1,4 @@
-"""Seed 003's experiment, checked from the exported queue-level CSV: 150
+"""The hybrid scheduler's balance experiment (docs/origins.md), checked from the exported queue-level CSV: 150
 items placed upstream of 6 chained tasks; under the hybrid rules the
 queues settle into a balanced staircase (equal upstream-minus-downstream
 differences), as in the paper's figure 13."""
@@ -12,8 +12,8 @@ from motion_helpers import require, run_binary
 
 def test_queues_converge_to_balance(tmp_path: Path) -> None:
     b = require("host")
-    out = tmp_path / "seed003.csv"
-    proc = run_binary(b, "test_sched", ["seed003_balance"], env={"SCHED_TRACE_CSV": str(out)})
+    out = tmp_path / "balance.csv"
+    proc = run_binary(b, "test_sched", ["hybrid_balance"], env={"SCHED_TRACE_CSV": str(out)})
     assert proc.returncode == 0, proc.stdout
     with out.open() as f:
         rows = [[int(v) for v in r.values()] for r in csv.DictReader(f)]

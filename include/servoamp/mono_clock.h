@@ -1,11 +1,20 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * The monotonic clock, read in one place for the whole library: the
- * scheduler's release times and job timings, motion_wait()'s deadline and
- * the tests' timeouts.
+ * mono_clock.h - the monotonic clock of servoamp's Linux programs, one
+ * definition: servod (cycle times, timeouts), the telemetry transport, the
+ * motion library (the scheduler's release times, motion_wait()'s deadline),
+ * the benches and the tests.
+ *
+ * POSIX user space only (not the kernel, not the firmware): the including
+ * file defines _POSIX_C_SOURCE >= 199309L (or _GNU_SOURCE) before its
+ * first system header, for clock_gettime().
  */
-#ifndef SERVOAMP_MOTION_MONO_CLOCK_H
-#define SERVOAMP_MOTION_MONO_CLOCK_H
+#ifndef SERVOAMP_MONO_CLOCK_H
+#define SERVOAMP_MONO_CLOCK_H
+
+#if defined(__KERNEL__)
+#error "servoamp/mono_clock.h is for user space (the kernel has ktime_get_ns)"
+#endif
 
 #include <stdint.h>
 #include <time.h>
