@@ -64,7 +64,7 @@ static int value_in_range(const struct sp_param_desc *d, uint32_t w)
 	double v;
 
 	if (d->type == SP_T_F32) {
-		float f = f_of(w);
+		float f = sp_f32_from_word(w);
 
 		return !isnan(f) && f >= (float)d->min && f <= (float)d->max;
 	}

@@ -129,9 +129,9 @@ A Firmware That Ignores STOP Cannot Be Stopped And Nothing Is Loaded After It
     Execute Shell Command    dmesg -c > /dev/null
     Execute Shell Command    echo stop > ${RPROC}/state    expected_rc=1
     Remoteproc State Should Be    running
-    Dmesg Should Contain    firmware did not park within 500 ms (status 0x52554e21): resetting CPU1
+    Dmesg Should Contain    firmware did not park within 500 ms (status ${RUNNING_LC}): resetting CPU1
     Dmesg Should Contain    CPU1 reset through SLCR A9_CPU_RST_CTRL
-    Dmesg Should Contain    CPU1 not confirmed stopped: status 0x52554e21, not 'PRKD', 50 ms after the SLCR reset
+    Dmesg Should Contain    CPU1 not confirmed stopped: status ${RUNNING_LC}, not 'PRKD', 50 ms after the SLCR reset
     Dmesg Should Contain    nothing will be loaded until CPU1 parks
     ${rst}=    Read Word    0xf8000244
     Should Be Equal As Integers    ${rst}    0
@@ -143,7 +143,7 @@ A Firmware That Ignores STOP Cannot Be Stopped And Nothing Is Loaded After It
     Execute Shell Command    dmesg -c > /dev/null
     Execute Shell Command    insmod /lib/modules/zynq_servo_rproc.ko
     Dmesg Should Contain    status word reads 'RUN!': a firmware may still run on CPU1, asking it to park
-    Dmesg Should Contain    CPU1 not confirmed stopped: status 0x52554e21
+    Dmesg Should Contain    CPU1 not confirmed stopped: status ${RUNNING_LC}
     Remoteproc State Should Be    offline
     Word Should Be    ${STATUS_WORD}    ${RUNNING}
     Execute Shell Command    dmesg -c > /dev/null
