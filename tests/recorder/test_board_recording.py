@@ -32,7 +32,8 @@ from servoamp import info, mcapio, netboard, plot, qemu
 from servoamp.record import RecordResult, record
 
 ENV = dict(os.environ, PYTHONUNBUFFERED="1")
-RECORD_S = 6.0
+GUEST_BEFORE_S = 1.5     # guest seconds on record before the parameter change
+GUEST_AFTER_S = 2.0      # and after the recovery
 AMP_E_STALLED = -9
 SAFESTOP = 0x53504F54
 RUNNING = 0x534E5552
@@ -60,18 +61,30 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         cb.sh("sleep 0.5")
         out["stats_before"] = cb.stats()
 
+        # the scenario is paced in guest time (guest sleeps), so it is the
+        # same on a quiet and on a loaded host; the recorder runs until told
         box: dict[str, RecordResult] = {}
+        on_record, stop_rec = threading.Event(), threading.Event()
+
+        def progress(r: RecordResult) -> None:
+            if r.cycles > 0:
+                on_record.set()
+
         th = threading.Thread(target=lambda: box.update(
-            r=record("127.0.0.1", cb.host_port, out["path"], RECORD_S)))
+            r=record("127.0.0.1", cb.host_port, out["path"], None, stop=stop_rec,
+                     on_progress=progress, connect_timeout=30.0)))
         t0 = time.monotonic()
         th.start()
-        time.sleep(1.5)
+        assert on_record.wait(30), "the recorder got no cycle in 30 s"
+        cb.sh(f"sleep {GUEST_BEFORE_S}")
         out["param_out"] = cb.ampctl("param set pos_kp 70")
-        time.sleep(1.0)
+        cb.sh("sleep 1")
         cb.ampctl("debug hang")
         cb.wait_servod_log("recovery complete")
         out["recovered_after_s"] = time.monotonic() - t0
-        th.join(timeout=RECORD_S + 30)
+        cb.sh(f"sleep {GUEST_AFTER_S}")
+        stop_rec.set()
+        th.join(timeout=60)
         assert not th.is_alive()
         out["res"] = box["r"]
         out["stats_after"] = cb.stats()
@@ -82,17 +95,25 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         p = subprocess.Popen(servoamp_cmd("record", "--connect", f"127.0.0.1:{cb.host_port}",
                                           "-o", str(sig_path), "--json"),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
-        time.sleep(3.0)
+        time.sleep(1.0)          # it connects (host time) ...
+        cb.sh("sleep 2")         # ... and records 2 s of guest time
         p.send_signal(signal.SIGINT)
         so, se = p.communicate(timeout=30)
         out["sigint"] = {"rc": p.returncode, "out": so, "err": se, "path": sig_path}
 
         # servod stops while a recorder is connected: drain, final STATS, EOF
         box2: dict[str, RecordResult] = {}
+        enough = threading.Event()   # 600 cycles on record: then servod stops
+
+        def progress(r: RecordResult) -> None:
+            if r.cycles >= 600:
+                enough.set()
+
         th = threading.Thread(target=lambda: box2.update(
-            r=record("127.0.0.1", cb.host_port, tmp / "stop.mcap", 30.0, reconnect=False)))
+            r=record("127.0.0.1", cb.host_port, tmp / "stop.mcap", 60.0, reconnect=False,
+                     on_progress=progress)))
         th.start()
-        time.sleep(1.5)
+        assert enough.wait(45), "the recorder got fewer than 600 cycles in 45 s"
         cb.sh("kill -TERM $(pidof servod); i=0; while pidof servod >/dev/null && [ $i -lt 100 ];"
               " do sleep 0.05; i=$((i+1)); done; ! pidof servod")
         th.join(timeout=30)
@@ -113,7 +134,7 @@ def test_every_cycle_on_record(run: dict[str, Any]) -> None:
           f"(recorder CPU {res.cpu_s:.2f} s = {res.cycles / max(res.cpu_s, 1e-9):.0f} cycles/CPU s); "
           f"servod: telem.dropped {b['telem.dropped']}, client_lost {b['telem.client_lost']}, "
           f"missed_irq {int(b['linux.missed_irq']) - int(a['linux.missed_irq'])}")
-    assert res.stopped_by == "duration" and res.connections == 1
+    assert res.stopped_by == "stop" and res.connections == 1
     if qemu.default_clock() == "virtual":
         # host load cannot cost the guest a cycle: Linux misses none, except
         # while remoteproc reloads the hung firmware (the kernel's recovery
