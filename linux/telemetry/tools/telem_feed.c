@@ -55,7 +55,7 @@ struct opts {
 };
 
 struct app {
-	unsigned long long exchanges, stale, missed, restarts;
+	_Atomic unsigned long long exchanges, stale, missed, restarts;	/* read by the drain thread */
 };
 
 static unsigned app_counters(void *arg, struct telem_counter *out, unsigned max)
