@@ -89,7 +89,7 @@ def run_once(board: qemu.Board, images: qemu.Images, cycles: int, period_us: int
                 stop.set()
 
         res = record.record("127.0.0.1", cb.host_port, out, None, stop=stop, on_progress=progress,
-                            connect_timeout=30.0)
+                            connect_timeout=30.0, token=cb.token)
         host_s = time.monotonic() - t0
         stats = cb.stats()
     s = info.summarize(out)

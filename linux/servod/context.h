@@ -68,6 +68,9 @@ struct servod_opts {
 	struct prog_opts prog;		/* G-code runner: scale, planner limits, idle mode */
 	char telem_addr[64];		/* from telem */
 	uint16_t telem_port;
+	const char *telem_token_file;	/* --telemetry-token FILE, or NULL */
+	unsigned char telem_token[TELEM_TOKEN_MAX];	/* its contents */
+	uint32_t telem_token_len;
 };
 
 struct servod {
@@ -106,6 +109,7 @@ void *cycle_thread(void *arg);
 void supervise(struct servod *sd);
 /* Telemetry (telemetry.c). */
 int telemetry_parse_opt(struct servod_opts *o);
+int telemetry_check_access(struct servod_opts *o);
 void telemetry_start(struct servod *sd);
 void telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, const struct amp_rx_info *rx,
 		     const struct amp_cmd_axis *cmd, uint32_t n);

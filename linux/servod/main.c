@@ -4,7 +4,7 @@
  *
  *   servod [-s SOCKET] [-p PARAMFILE] [-a AMPLITUDE_INC] [-f FREQ_HZ]
  *          [--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N]
- *          [--telemetry ADDR:PORT|off] [--id CONTROLLER_ID]
+ *          [--telemetry ADDR:PORT|off] [--telemetry-token FILE] [--id CONTROLLER_ID]
  *          [--inc-per-mm N] [--vmax MM_S] [--amax MM_S2] [--travel MM]
  *          [--idle sine|hold] [-v]
  *
@@ -37,15 +37,15 @@ static void on_signal(int sig)
 }
 
 static const struct servod_opts default_opts = {
-	SERVOD_SOCKET, SERVOD_PARAMS, 2000.0, 0.5, 133000000u, 80, 0, 100000000u, "0.0.0.0:7700",
-	"zynq7000_qemu", { 1000.0, 200.0, 2000.0, 500.0, 1000u, 0 }, "", TELEM_DEFAULT_PORT,
+	SERVOD_SOCKET, SERVOD_PARAMS, 2000.0, 0.5, 133000000u, 80, 0, 100000000u, "127.0.0.1:7700",
+	"zynq7000_qemu", { 1000.0, 200.0, 2000.0, 500.0, 1000u, 0 }, "", TELEM_DEFAULT_PORT, NULL, { 0 }, 0,
 };
 
 static void usage(void)
 {
 	fprintf(stderr, "usage: servod [-s SOCKET] [-p PARAMFILE] [-a AMPLITUDE_INC] [-f FREQ_HZ] "
 			"[--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N] "
-			"[--telemetry ADDR:PORT|off] [--id NAME] [--inc-per-mm N] [--vmax MM_S] "
+			"[--telemetry ADDR:PORT|off] [--telemetry-token FILE] [--id NAME] [--inc-per-mm N] [--vmax MM_S] "
 			"[--amax MM_S2] [--travel MM] [--idle sine|hold] [-v]\n");
 }
 
@@ -77,6 +77,8 @@ static int parse_options(struct servod_opts *o, int argc, char **argv)
 			o->prio = atoi(v);
 		else if (!strcmp(a, "--telemetry"))
 			o->telem = v;
+		else if (!strcmp(a, "--telemetry-token"))
+			o->telem_token_file = v;
 		else if (!strcmp(a, "--id"))
 			o->id = v;
 		else if (!strcmp(a, "--inc-per-mm"))
@@ -103,6 +105,8 @@ static int parse_options(struct servod_opts *o, int argc, char **argv)
 		fprintf(stderr, "servod: --telemetry wants ADDR:PORT, [ADDR6]:PORT or off, not '%s'\n", o->telem);
 		return 1;
 	}
+	if (telemetry_check_access(o))
+		return 1;
 	return 0;
 bad:
 	usage();

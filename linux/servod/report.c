@@ -121,6 +121,11 @@ static void put_telem(struct servod *sd, struct out *o, const struct telem_stats
 	       "telem.ring_high_water=%u\n",
 	    ts->clients, (unsigned long long)ts->clients_total, (unsigned long long)ts->bytes_sent,
 	    ts->ring_high_water);
+	put(o, "telem.auth_failed=%llu\ntelem.auth_timeout=%llu\ntelem.evicted=%llu\ntelem.refused=%llu\n"
+	       "telem.stalled=%llu\ntelem.protocol=%llu\n",
+	    (unsigned long long)ts->auth_failed, (unsigned long long)ts->auth_timeout,
+	    (unsigned long long)ts->evicted, (unsigned long long)ts->refused,
+	    (unsigned long long)ts->stalled, (unsigned long long)ts->protocol);
 }
 
 static void put_servo(struct out *o, const struct sp_status *s)

@@ -6,9 +6,15 @@
  * of an attach (GAP and the parameter set loaded).
  */
 #define _GNU_SOURCE
+#include <arpa/inet.h>
 #include <errno.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "context.h"
 
@@ -44,6 +50,57 @@ int telemetry_parse_opt(struct servod_opts *o)
 	return 0;
 }
 
+/* 1 when addr is a loopback address (127.0.0.0/8, ::1). */
+static int is_loopback(const char *addr)
+{
+	struct in_addr a4;
+	struct in6_addr a6;
+
+	if (inet_pton(AF_INET, addr, &a4) == 1)
+		return (ntohl(a4.s_addr) >> 24) == 127u;
+	if (inet_pton(AF_INET6, addr, &a6) == 1)
+		return IN6_IS_ADDR_LOOPBACK(&a6);
+	return 0;
+}
+
+/* The token file (--telemetry-token): its bytes without trailing whitespace,
+ * 16..TELEM_TOKEN_MAX of them. And the rule of who may connect: an address
+ * other than loopback only with a token. 0, or 1 with the reason on stderr. */
+int telemetry_check_access(struct servod_opts *o)
+{
+	if (o->telem_token_file) {
+		unsigned char buf[TELEM_TOKEN_MAX + 2];
+		int fd = open(o->telem_token_file, O_RDONLY | O_CLOEXEC);
+		ssize_t n;
+		struct stat st;
+
+		if (fd < 0) {
+			fprintf(stderr, "servod: --telemetry-token %s: %s\n", o->telem_token_file, strerror(errno));
+			return 1;
+		}
+		if (fstat(fd, &st) == 0 && (st.st_mode & (S_IRWXG | S_IRWXO)))
+			fprintf(stderr, "servod: warning: --telemetry-token %s is readable by group/others\n",
+				o->telem_token_file);
+		n = read(fd, buf, sizeof(buf));
+		close(fd);
+		while (n > 0 && (buf[n - 1] == '\n' || buf[n - 1] == '\r' || buf[n - 1] == ' ' || buf[n - 1] == '\t'))
+			n--;
+		if (n < 16 || n > (ssize_t)TELEM_TOKEN_MAX) {
+			fprintf(stderr, "servod: --telemetry-token %s: the token must be 16..%u bytes\n",
+				o->telem_token_file, TELEM_TOKEN_MAX);
+			return 1;
+		}
+		memcpy(o->telem_token, buf, (size_t)n);
+		o->telem_token_len = (uint32_t)n;
+	}
+	if (strcmp(o->telem, "off") && !o->telem_token_len && !is_loopback(o->telem_addr)) {
+		fprintf(stderr, "servod: --telemetry %s is not a loopback address: it needs "
+				"--telemetry-token FILE (docs/telemetry.md)\n", o->telem);
+		return 1;
+	}
+	return 0;
+}
+
 void telemetry_start(struct servod *sd)
 {
 	struct telem_cfg tc;
@@ -64,6 +121,8 @@ void telemetry_start(struct servod *sd)
 	tc.mlock = 1;
 	tc.app_counters = cycle_stats_counters;
 	tc.app_arg = &sd->pub;
+	tc.token = sd->opt.telem_token_len ? sd->opt.telem_token : NULL;
+	tc.token_len = sd->opt.telem_token_len;
 	rc = telem_init(&sd->telem, &tc);
 	if (rc == 0)
 		rc = telem_start(&sd->telem);
@@ -73,8 +132,8 @@ void telemetry_start(struct servod *sd)
 		return;
 	}
 	sd->telem_on = 1;
-	logm(sd, "telemetry on %s:%u (%u axes, ring %u cycles)", sd->opt.telem_addr, telem_port(&sd->telem),
-	     tc.n_axes, tc.ring_capacity);
+	logm(sd, "telemetry on %s:%u (%u axes, ring %u cycles, %s)", sd->opt.telem_addr, telem_port(&sd->telem),
+	     tc.n_axes, tc.ring_capacity, tc.token_len ? "token required" : "no token");
 }
 
 void telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, const struct amp_rx_info *rx,

@@ -65,7 +65,20 @@ struct telem_client {
 	uint64_t lost, lost_from, lost_to;	/* cycles not sent (buffer full) */
 	uint64_t lost_total;		/* cycles this client lost, in total */
 	uint64_t events_lost;
+	int authed;			/* AUTH accepted: the client gets the stream */
+	uint64_t t_conn;		/* accepted at (CLOCK_MONOTONIC ns) */
+	uint64_t t_progress;		/* last time its socket took bytes, or its buffer was empty */
+	uint32_t in_len;		/* bytes of the AUTH frame received so far */
+	uint32_t rx_after;		/* bytes received after the AUTH frame */
+	unsigned char in[8 + TELEM_TOKEN_MAX];
 };
+
+/* What one client may send: one AUTH frame, then nothing. client_read takes
+ * at most CLIENT_READ_MAX bytes per pass (a flooding client cannot keep the
+ * drain thread in recv), and closes a client that sent more than
+ * CLIENT_AFTER_MAX bytes after its AUTH. */
+#define CLIENT_READ_MAX 4096u
+#define CLIENT_AFTER_MAX 4096u
 
 /* ---- little-endian encoding ---- */
 static unsigned char *put16(unsigned char *p, uint16_t v) { memcpy(p, &v, 2); return p + 2; }
@@ -103,7 +116,7 @@ static uint64_t realtime_ns(void)
 void telem_cfg_defaults(struct telem_cfg *cfg)
 {
 	memset(cfg, 0, sizeof(*cfg));
-	cfg->listen_addr = "0.0.0.0";
+	cfg->listen_addr = "127.0.0.1";
 	cfg->port = TELEM_DEFAULT_PORT;
 	cfg->controller_id = "servoamp";
 	cfg->n_axes = AMP_MAX_AXES;
@@ -116,6 +129,8 @@ void telem_cfg_defaults(struct telem_cfg *cfg)
 	cfg->drain_interval_us = 2000u;
 	cfg->stats_interval_ms = 1000u;
 	cfg->linger_ms = 1000u;
+	cfg->auth_timeout_ms = 2000u;
+	cfg->stall_timeout_ms = 10000u;
 }
 
 /* The session id needs uniqueness, not secrecy: never wait for the kernel's
@@ -188,9 +203,14 @@ int telem_init(struct telem *t, const struct telem_cfg *cfg)
 	if (!cfg || !cfg->listen_addr || cfg->n_axes < 1u || cfg->n_axes > AMP_MAX_AXES ||
 	    cfg->event_capacity < 1u || cfg->max_clients < 1u || cfg->max_clients > TELEM_MAX_CLIENTS ||
 	    cfg->client_buffer < 64u * 1024u || cfg->drain_interval_us < 100u ||
-	    cfg->ring_capacity < 2u || (cfg->ring_capacity & (cfg->ring_capacity - 1u)))
+	    cfg->ring_capacity < 2u || (cfg->ring_capacity & (cfg->ring_capacity - 1u)) ||
+	    cfg->token_len > TELEM_TOKEN_MAX || (cfg->token_len && !cfg->token) ||
+	    cfg->auth_timeout_ms < 1u || cfg->stall_timeout_ms < 1u)
 		return -EINVAL;
 	t->cfg = *cfg;
+	if (cfg->token_len)
+		memcpy(t->token, cfg->token, cfg->token_len);
+	t->cfg.token = cfg->token_len ? t->token : NULL;
 	snprintf(t->controller_id, sizeof(t->controller_id), "%s",
 		 cfg->controller_id ? cfg->controller_id : "");
 	t->cfg.controller_id = t->controller_id;
@@ -382,6 +402,12 @@ void telem_get_stats(struct telem *t, struct telem_stats *st)
 	st->clients_total = atomic_load_explicit(&t->clients_total, memory_order_relaxed);
 	st->clients = atomic_load_explicit(&t->clients_now, memory_order_relaxed);
 	st->ring_high_water = atomic_load_explicit(&t->ring_high_water, memory_order_relaxed);
+	st->auth_failed = atomic_load_explicit(&t->drop_auth_failed, memory_order_relaxed);
+	st->auth_timeout = atomic_load_explicit(&t->drop_auth_timeout, memory_order_relaxed);
+	st->evicted = atomic_load_explicit(&t->drop_evicted, memory_order_relaxed);
+	st->refused = atomic_load_explicit(&t->drop_refused, memory_order_relaxed);
+	st->stalled = atomic_load_explicit(&t->drop_stalled, memory_order_relaxed);
+	st->protocol = atomic_load_explicit(&t->drop_protocol, memory_order_relaxed);
 }
 
 /* ---- drain thread: clients ------------------------------------------------------ */
@@ -394,7 +420,24 @@ static void client_close(struct telem *t, struct telem_client *c)
 	free(c->buf);
 	c->buf = NULL;
 	c->off = c->len = 0;
-	atomic_fetch_sub_explicit(&t->clients_now, 1u, memory_order_relaxed);
+	if (c->authed)
+		atomic_fetch_sub_explicit(&t->clients_now, 1u, memory_order_relaxed);
+	c->authed = 0;
+}
+
+/* Close a client for a reason the server has (counted). */
+static void client_drop(struct telem *t, struct telem_client *c, _Atomic uint64_t *reason)
+{
+	if (c->fd < 0)
+		return;
+	atomic_fetch_add_explicit(reason, 1u, memory_order_relaxed);
+	client_close(t, c);
+}
+
+/* A client that gets the stream: connected and authenticated. */
+static int live(const struct telem_client *c)
+{
+	return c->fd >= 0 && c->authed;
 }
 
 static size_t client_room(struct telem *t, struct telem_client *c, size_t need)
@@ -425,7 +468,7 @@ static void client_put(struct telem *t, struct telem_client *c, const unsigned c
 {
 	size_t need = n + (c->lost ? FRAME_HDR + GAP_LEN : 0u) + (cycle ? EVENT_RESERVE : 0u);
 
-	if (c->fd < 0)
+	if (!live(c))
 		return;
 	if (client_room(t, c, need) < need) {
 		if (cycle) {
@@ -463,7 +506,7 @@ static void broadcast_ring_gap(struct telem *t, uint64_t t_ns, uint64_t from, ui
 		struct telem_client *c = &t->clients[i];
 		size_t need = sizeof(g) + (c->lost ? FRAME_HDR + GAP_LEN : 0u);
 
-		if (c->fd < 0)
+		if (!live(c))
 			continue;
 		if (!c->lost && client_room(t, c, need) >= need) {
 			client_append(c, g, sizeof(g));
@@ -482,7 +525,7 @@ static void broadcast(struct telem *t, const unsigned char *m, size_t n, const u
 		      uint64_t t_ns)
 {
 	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
-		if (t->clients[i].fd >= 0)
+		if (live(&t->clients[i]))
 			client_put(t, &t->clients[i], m, n, cycle, t_ns);
 }
 
@@ -504,58 +547,181 @@ static size_t enc_hello(struct telem *t, unsigned char *b)
 	return (size_t)(p - b);
 }
 
+/* A slot for a new connection: a free one (within max_clients), else the
+ * one of the oldest connection that has not authenticated yet (it is closed:
+ * idle or slow connections cannot lock the recorder out), else none. */
+static struct telem_client *client_slot(struct telem *t)
+{
+	struct telem_client *pend = NULL;
+	unsigned used = 0;
+
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++) {
+		struct telem_client *c = &t->clients[i];
+
+		if (c->fd < 0)
+			continue;
+		used++;
+		if (!c->authed && (!pend || c->t_conn < pend->t_conn))
+			pend = c;
+	}
+	if (used < t->cfg.max_clients)
+		for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
+			if (t->clients[i].fd < 0)
+				return &t->clients[i];
+	if (pend) {
+		client_drop(t, pend, &t->drop_evicted);
+		return pend;
+	}
+	return NULL;
+}
+
 static void accept_clients(struct telem *t)
 {
 	for (;;) {
 		int fd = accept4(t->listen_fd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
-		struct telem_client *c = NULL;
-		unsigned char hello[FRAME_HDR + HELLO_LEN];
+		struct telem_client *c;
 		int one = 1;
 
 		if (fd < 0)
 			return;
-		if (atomic_load_explicit(&t->clients_now, memory_order_relaxed) < t->cfg.max_clients)
-			for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
-				if (t->clients[i].fd < 0) {
-					c = &t->clients[i];
-					break;
-				}
-		if (!c || !(c->buf = malloc(t->cfg.client_buffer))) {
-			close(fd);	/* too many clients */
+		c = client_slot(t);
+		if (!c) {
+			atomic_fetch_add_explicit(&t->drop_refused, 1u, memory_order_relaxed);
+			close(fd);	/* every slot streams to an authenticated client */
+			continue;
+		}
+		if (!(c->buf = malloc(t->cfg.client_buffer))) {
+			close(fd);
 			continue;
 		}
 		setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
 		c->fd = fd;
 		c->off = c->len = 0;
 		c->lost = c->lost_total = c->events_lost = 0;
-		atomic_fetch_add_explicit(&t->clients_now, 1u, memory_order_relaxed);
+		c->authed = 0;
+		c->in_len = c->rx_after = 0;
+		c->t_conn = c->t_progress = mono_now_ns();
 		atomic_fetch_add_explicit(&t->clients_total, 1u, memory_order_relaxed);
-		client_append(c, hello, enc_hello(t, hello));
 	}
 }
 
+/* Constant-time comparison of the AUTH payload with the token. */
+static int token_ok(const struct telem *t, const unsigned char *p, uint32_t n)
+{
+	unsigned char d = 0;
+
+	if (!t->cfg.token_len)
+		return 1;
+	if (n != t->cfg.token_len)
+		return 0;
+	for (uint32_t i = 0; i < n; i++)
+		d |= (unsigned char)(p[i] ^ t->token[i]);
+	return d == 0;
+}
+
+/* The AUTH frame so far in c->in: 1 complete and accepted, 0 incomplete,
+ * -1 refused. */
+static int auth_check(struct telem *t, struct telem_client *c)
+{
+	uint16_t type, flags;
+	uint32_t len;
+
+	if (c->in_len < FRAME_HDR)
+		return 0;
+	memcpy(&type, c->in, 2);
+	memcpy(&flags, c->in + 2, 2);
+	memcpy(&len, c->in + 4, 4);
+	if (type != TELEM_MSG_AUTH || flags || len > TELEM_TOKEN_MAX)
+		return -1;
+	if (c->in_len < FRAME_HDR + len)
+		return 0;
+	return token_ok(t, c->in + FRAME_HDR, len) ? 1 : -1;
+}
+
+static void client_authed(struct telem *t, struct telem_client *c)
+{
+	unsigned char hello[FRAME_HDR + HELLO_LEN];
+
+	c->authed = 1;
+	c->t_progress = mono_now_ns();
+	atomic_fetch_add_explicit(&t->clients_now, 1u, memory_order_relaxed);
+	client_append(c, hello, enc_hello(t, hello));
+}
+
+/* At most CLIENT_READ_MAX bytes per call: the AUTH frame (exactly its bytes,
+ * so that nothing after it is mistaken for it), then anything else is
+ * discarded and counted against CLIENT_AFTER_MAX. */
 static void client_read(struct telem *t, struct telem_client *c)
 {
-	char sink[256];
+	unsigned char sink[512];
+	size_t budget = CLIENT_READ_MAX;
 
-	for (;;) {
-		ssize_t n = recv(c->fd, sink, sizeof(sink), MSG_DONTWAIT);
+	while (c->fd >= 0 && budget) {
+		unsigned char *dst = sink;
+		size_t want = sizeof(sink) < budget ? sizeof(sink) : budget;
+		ssize_t n;
 
-		if (n > 0)
-			continue;	/* clients send nothing we use */
-		if (n == 0 || (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
+		if (!c->authed) {
+			uint32_t len = 0;
+
+			if (c->in_len >= FRAME_HDR)
+				memcpy(&len, c->in + 4, 4);
+			dst = c->in + c->in_len;
+			want = (c->in_len < FRAME_HDR ? FRAME_HDR : FRAME_HDR + len) - c->in_len;
+		}
+		n = recv(c->fd, dst, want, MSG_DONTWAIT);
+		if (n < 0 && errno == EINTR)
+			continue;
+		if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK)) {
 			client_close(t, c);
-		return;
+			return;
+		}
+		if (n < 0)
+			return;		/* nothing more for now */
+		budget -= (size_t)n;
+		if (!c->authed) {
+			int ok;
+
+			c->in_len += (uint32_t)n;
+			ok = auth_check(t, c);
+			if (ok < 0)
+				client_drop(t, c, &t->drop_auth_failed);
+			else if (ok > 0)
+				client_authed(t, c);
+			continue;
+		}
+		c->rx_after += (uint32_t)n;
+		if (c->rx_after > CLIENT_AFTER_MAX)
+			client_drop(t, c, &t->drop_protocol);
+	}
+}
+
+/* Deadlines: no AUTH in time, or a socket that took no byte for too long. */
+static void client_deadlines(struct telem *t, uint64_t now)
+{
+	uint64_t auth_ns = (uint64_t)t->cfg.auth_timeout_ms * 1000000ull;
+	uint64_t stall_ns = (uint64_t)t->cfg.stall_timeout_ms * 1000000ull;
+
+	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++) {
+		struct telem_client *c = &t->clients[i];
+
+		if (c->fd < 0)
+			continue;
+		if (!c->authed && now - c->t_conn > auth_ns)
+			client_drop(t, c, &t->drop_auth_timeout);
+		else if (c->authed && c->off < c->len && now - c->t_progress > stall_ns)
+			client_drop(t, c, &t->drop_stalled);
 	}
 }
 
 static void client_flush(struct telem *t, struct telem_client *c)
 {
-	while (c->fd >= 0 && c->off < c->len) {
+	while (live(c) && c->off < c->len) {
 		ssize_t n = send(c->fd, c->buf + c->off, c->len - c->off, MSG_DONTWAIT | MSG_NOSIGNAL);
 
 		if (n > 0) {
 			c->off += (size_t)n;
+			c->t_progress = mono_now_ns();
 			atomic_fetch_add_explicit(&t->bytes_sent, (uint64_t)n, memory_order_relaxed);
 		} else if (n < 0 && errno == EINTR) {
 			continue;
@@ -565,8 +731,10 @@ static void client_flush(struct telem *t, struct telem_client *c)
 			client_close(t, c);
 		}
 	}
-	if (c->fd >= 0 && c->off == c->len)
+	if (live(c) && c->off == c->len) {
 		c->off = c->len = 0;
+		c->t_progress = mono_now_ns();
+	}
 }
 
 /* ---- drain thread: messages -------------------------------------------------------- */
@@ -676,7 +844,7 @@ static void send_stats(struct telem *t, uint32_t flags)
 		struct telem_client *c = &t->clients[i];
 		unsigned char *p;
 
-		if (c->fd < 0)
+		if (!live(c))
 			continue;
 		p = frame(b, TELEM_MSG_STATS, STATS_HDR_LEN + COUNTER_LEN * nc);
 		p = put64(p, now);
@@ -750,7 +918,7 @@ static void flush_all(struct telem *t)
 static int pending(struct telem *t)
 {
 	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++)
-		if (t->clients[i].fd >= 0 && t->clients[i].off < t->clients[i].len)
+		if (live(&t->clients[i]) && t->clients[i].off < t->clients[i].len)
 			return 1;
 	return 0;
 }
@@ -765,6 +933,7 @@ static void *drain_main(void *arg)
 		tick_ms = 1;
 	while (atomic_load_explicit(&t->running, memory_order_acquire)) {
 		poll_clients(t, tick_ms);
+		client_deadlines(t, mono_now_ns());
 		drain_ring(t);
 		drain_events(t);
 		if (t->cfg.stats_interval_ms && mono_now_ns() >= next_stats) {

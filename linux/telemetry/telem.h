@@ -12,7 +12,7 @@
  *
  *   struct telem t;
  *   struct telem_cfg cfg;
- *   telem_cfg_defaults(&cfg);          // 0.0.0.0:7700, ring 4096, ...
+ *   telem_cfg_defaults(&cfg);          // 127.0.0.1:7700, ring 4096, ...
  *   cfg.n_axes = 4; cfg.cycle_period_ns = 1000000; cfg.clock_hz = ...;
  *   telem_init(&t, &cfg);              // allocates, binds, listens
  *   telem_start(&t);                   // starts the drain thread
@@ -48,6 +48,7 @@
 #define TELEM_COUNTER_NAME_LEN 24u
 #define TELEM_QUEUE_NAME_LEN 16u
 #define TELEM_ID_LEN 32u		/* controller id in HELLO */
+#define TELEM_TOKEN_MAX 64u		/* bytes of the shared token in AUTH */
 
 /* Message types on the wire (frame header "type"). */
 enum telem_msg_type {
@@ -58,6 +59,7 @@ enum telem_msg_type {
 	TELEM_MSG_LOG = 5,
 	TELEM_MSG_GAP = 6,
 	TELEM_MSG_QUEUES = 7,
+	TELEM_MSG_AUTH = 8,	/* client -> server, the first and only client frame */
 };
 
 /* Exchange status of a cycle: the same values as amp_lib's enum amp_rx_status. */
@@ -128,7 +130,7 @@ struct telem_queue_level {
 };
 
 struct telem_cfg {
-	const char *listen_addr;	/* numeric address, "0.0.0.0" default, "::1" ok */
+	const char *listen_addr;	/* numeric address, "127.0.0.1" default, "::1" ok */
 	uint16_t port;			/* 0: any free port (see telem_port) */
 	const char *controller_id;	/* HELLO, <= 31 bytes used */
 	uint32_t n_axes;		/* axes sent per CYCLE, 1..AMP_MAX_AXES */
@@ -141,6 +143,16 @@ struct telem_cfg {
 	uint32_t drain_interval_us;	/* drain thread period */
 	uint32_t stats_interval_ms;	/* STATS every ... (0: only the final one) */
 	uint32_t linger_ms;		/* telem_stop: time to flush clients */
+	/* Who may connect. Every client must send one AUTH frame within
+	 * auth_timeout_ms of connecting; until then it gets nothing and its slot
+	 * may be taken by a newer connection. With a token (token_len 1..
+	 * TELEM_TOKEN_MAX bytes, copied) the AUTH payload must equal it; a wrong
+	 * or malformed AUTH closes the connection. Without one (NULL) any AUTH
+	 * payload is accepted. */
+	const void *token;
+	uint32_t token_len;
+	uint32_t auth_timeout_ms;	/* default 2000 */
+	uint32_t stall_timeout_ms;	/* a client whose socket takes no byte for this long is dropped; default 10000 */
 	int mlock;			/* lock the ring in memory (mlock) */
 	/* Called from the drain thread for each STATS message: fill up to max
 	 * application counters, return how many. May be NULL. */
@@ -158,8 +170,15 @@ struct telem_stats {
 	uint64_t client_lost;		/* records not sent to slow clients (all clients) */
 	uint64_t bytes_sent;
 	uint64_t clients_total;		/* connections accepted */
-	uint32_t clients;		/* connected now */
+	uint32_t clients;		/* connected now (authenticated) */
 	uint32_t ring_high_water;
+	/* connections closed by the server, by reason */
+	uint64_t auth_failed;		/* wrong token or malformed AUTH */
+	uint64_t auth_timeout;		/* no AUTH within auth_timeout_ms */
+	uint64_t evicted;		/* not yet authenticated, slot given to a newer connection */
+	uint64_t refused;		/* every slot held by authenticated clients */
+	uint64_t stalled;		/* socket took no byte for stall_timeout_ms */
+	uint64_t protocol;		/* sent more than AUTH (flooding) */
 };
 
 /* ---- the transport -------------------------------------------------------- */
@@ -184,6 +203,9 @@ struct telem {
 	_Atomic uint64_t clients_total;
 	_Atomic uint32_t clients_now;
 	_Atomic uint32_t ring_high_water;
+	_Atomic uint64_t drop_auth_failed, drop_auth_timeout, drop_evicted, drop_refused,
+		drop_stalled, drop_protocol;
+	unsigned char token[TELEM_TOKEN_MAX];
 	uint64_t expect_seq;
 	uint64_t prev_cycle;
 	int have_prev;

@@ -1,6 +1,6 @@
 """servoamp command-line entry point (host side).
 
-    servoamp record --connect HOST:PORT -o FILE.mcap [--duration S]
+    servoamp record --connect HOST:PORT -o FILE.mcap [--duration S] [--token-file F]
     servoamp plot FILE.mcap -o DIR [--queues CSV]
     servoamp info FILE.mcap [--json]
 """
@@ -24,6 +24,7 @@ def _hostport(s: str) -> tuple[str, int]:
 
 def _cmd_record(args: argparse.Namespace) -> int:
     from servoamp.record import record
+    from servoamp.telemetry import read_token as tw_read_token
 
     stop = threading.Event()
 
@@ -33,10 +34,20 @@ def _cmd_record(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     host, port = args.connect
+    token = None
+    if args.token_file:
+        try:
+            token = tw_read_token(args.token_file)
+        except OSError as e:
+            print(f"servoamp record: --token-file: {e}", file=sys.stderr)
+            return 2
+    elif args.token:
+        token = args.token.encode()
     try:
         res = record(host, port, args.output, args.duration, reconnect=not args.no_reconnect,
                      stop=stop, connect_timeout=args.connect_timeout,
-                     flush_interval=args.flush_interval, compression=args.compression)
+                     flush_interval=args.flush_interval, compression=args.compression,
+                     token=token)
     except ConnectionError as e:
         print(f"servoamp record: {e}", file=sys.stderr)
         return 3
@@ -73,6 +84,11 @@ def main(argv: list[str] | None = None) -> int:
                         "(bounds what SIGKILL loses)")
     p.add_argument("--compression", choices=["zstd", "lz4", "none"], default="zstd")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    tok = p.add_mutually_exclusive_group()
+    tok.add_argument("--token", metavar="TOKEN",
+                     help="the shared token servod was given (--telemetry-token); "
+                          "visible in the process list: prefer --token-file")
+    tok.add_argument("--token-file", metavar="FILE", help="read the token from FILE")
 
     p = sub.add_parser("plot", help="PNG figures from a recording")
     p.add_argument("file")

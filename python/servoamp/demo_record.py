@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
 
         box: dict[str, RecordResult] = {}
         th = threading.Thread(target=lambda: box.update(
-            r=record("127.0.0.1", cb.host_port, mcap, args.seconds)))
+            r=record("127.0.0.1", cb.host_port, mcap, args.seconds, token=cb.token)))
         _say(f"recording {args.seconds:g} s (host time) into {mcap}")
         th.start()
         time.sleep(min(1.5, args.seconds / 3))

@@ -14,11 +14,19 @@ and ``ampctl`` on the console::
     with ControllerBoard() as cb:
         cb.start_servod()
         cb.start_firmware()
-        res = servoamp.record.record("127.0.0.1", cb.host_port, "run.mcap", 5.0)
+        res = servoamp.record.record("127.0.0.1", cb.host_port, "run.mcap", 5.0,
+                                     token=cb.token)
+
+servod listens on loopback only unless told otherwise, and anything else
+needs a token (docs/telemetry.md). The forward reaches the guest's
+10.0.2.15, so :meth:`ControllerBoard.start_servod` passes
+``--telemetry 10.0.2.15:7700 --telemetry-token /tmp/telemetry.token`` with a
+fresh random token (``cb.token``) that it writes into the guest first.
 """
 
 from __future__ import annotations
 
+import secrets
 import socket
 import time
 from pathlib import Path
@@ -33,6 +41,7 @@ TELEMETRY_PORT = 7700
 GUEST_ADDR = "10.0.2.15/24"
 NIC_MODEL = "cadence_gem"
 SERVOD_LOG = "/tmp/servod.log"
+TOKEN_FILE = "/tmp/telemetry.token"
 RPROC = "/sys/class/remoteproc/remoteproc0"
 
 
@@ -81,6 +90,7 @@ class ControllerBoard:
         self.machine: qemu.QemuMachine | None = None
         self.boot_times: qemu.BootTimes | None = None
         self.prompt = str(self.board.data["linux"]["prompt"])
+        self.token = secrets.token_hex(16)  # servod's --telemetry-token, per boot
 
     # -- lifecycle -------------------------------------------------------------------
     def start(self, timeout: float = 90.0) -> ControllerBoard:
@@ -150,9 +160,18 @@ class ControllerBoard:
         return {k: v for k, _, v in (ln.partition("=") for ln in out.splitlines()) if _}
 
     # -- the controller ------------------------------------------------------------------
+    def telemetry_args(self) -> str:
+        """servod's options for telemetry through the forward: the guest's
+        address and the token (written into the guest, mode 0600)."""
+        self.sh(f"umask 077; echo {self.token} > {TOKEN_FILE}")
+        return f"--telemetry {GUEST_ADDR.split('/')[0]}:{TELEMETRY_PORT} --telemetry-token {TOKEN_FILE}"
+
     def start_servod(self, args: str = "") -> None:
         """servod in the background, its log in /tmp/servod.log; waits until
-        it runs (and, with telemetry, listens)."""
+        it runs (and, with telemetry, listens). Without a --telemetry in
+        args, telemetry is on the guest's address with this boot's token."""
+        if "--telemetry" not in args:
+            args = f"{self.telemetry_args()} {args}".strip()
         self.sh(f"rm -f {SERVOD_LOG}; (servod {args} > {SERVOD_LOG} 2>&1 &)")
         self.wait_servod_log("waiting for the servo")
 
@@ -168,6 +187,7 @@ class ControllerBoard:
             try:
                 with socket.create_connection(("127.0.0.1", self.host_port), timeout=2.0) as s:
                     s.settimeout(3.0)
+                    s.sendall(tw.encode_auth(self.token))
                     sp = tw.FrameSplitter()
                     while True:
                         data = s.recv(4096)

@@ -239,7 +239,8 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
            connect_timeout: float = 10.0, max_backoff: float = 2.0,
            flush_interval: float = 1.0, chunk_size: int = 1 << 20,
            compression: str = "zstd",
-           on_progress: Callable[[RecordResult], None] | None = None) -> RecordResult:
+           on_progress: Callable[[RecordResult], None] | None = None,
+           token: bytes | str | None = None) -> RecordResult:
     """Record from host:port into out until duration (s, wall clock) elapses,
     stop is set, or (reconnect=False) the stream ends.
 
@@ -248,7 +249,11 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
     /servoamp/gap. Without a first connection within connect_timeout (when
     no duration is given) ConnectionError is raised. The file is finalized
     (summary, indexes) in every case but SIGKILL.
+
+    Every connection starts with an AUTH frame carrying token (servod's
+    --telemetry-token; None: an empty token, for a server without one).
     """
+    auth = tw.encode_auth(token)
     comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
             "none": CompressionType.NONE}[compression]
     stop = stop or threading.Event()
@@ -275,6 +280,7 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
                     sock = socket.create_connection((host, port), timeout=1.0)
                     sock.settimeout(0.1)
                     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
+                    sock.sendall(auth)
                     splitter = tw.FrameSplitter()
                     ever_connected = True
                     backoff = 0.05

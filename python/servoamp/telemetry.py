@@ -21,6 +21,8 @@ MSG_PARAM = 4
 MSG_LOG = 5
 MSG_GAP = 6
 MSG_QUEUES = 7
+MSG_AUTH = 8  # client -> server: the first and only frame a client sends
+TOKEN_MAX = 64
 
 FRAME = struct.Struct("<HHI")
 HELLO = struct.Struct("<IHHQQQIIII32s")
@@ -38,6 +40,21 @@ QUEUE = struct.Struct("<16sII")
 assert FRAME.size == 8 and HELLO.size == 80 and CYCLE_HDR.size == 52
 assert STATS_HDR.size == 104 and COUNTER.size == 32 and PARAM.size == 80
 assert LOG_HDR.size == 40 and GAP.size == 40 and QUEUES_HDR.size == 16 and QUEUE.size == 24
+
+
+def encode_auth(token: bytes | str | None = None) -> bytes:
+    """The AUTH frame a client sends right after connecting (docs/telemetry.md):
+    the shared token as payload, empty when the server has none."""
+    t = token.encode() if isinstance(token, str) else (token or b"")
+    if len(t) > TOKEN_MAX:
+        raise ValueError(f"telemetry token longer than {TOKEN_MAX} bytes")
+    return FRAME.pack(MSG_AUTH, 0, len(t)) + t
+
+
+def read_token(path: str) -> bytes:
+    """A token file as servod reads it: its bytes without trailing whitespace."""
+    with open(path, "rb") as f:
+        return f.read().rstrip()
 
 EXCHANGE_NAMES = ("fresh", "stale", "torn", "missed", "invalid", "none")
 GAP_REASONS = {1: "ring_overflow", 2: "client_overflow", 3: "controller_restart",

@@ -1,11 +1,17 @@
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
 import pytest
 
 from recorder_helpers import TOP, make
+
+# Subprocesses (`python -m servoamp.cli ...`) run this tree's servoamp, not
+# the one the shared virtualenv was installed from.
+os.environ["PYTHONPATH"] = os.pathsep.join(
+    [str(TOP / "python")] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
 
 
 @pytest.fixture(scope="session")

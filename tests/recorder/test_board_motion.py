@@ -101,7 +101,8 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         box: dict[str, RecordResult] = {}
         stop_rec = threading.Event()
         th = threading.Thread(target=lambda: box.update(
-            r=record("127.0.0.1", cb.host_port, out["path"], RECORD_MAX_S, stop=stop_rec)))
+            r=record("127.0.0.1", cb.host_port, out["path"], RECORD_MAX_S, stop=stop_rec,
+                     token=cb.token)))
         th.start()
         time.sleep(0.5)
         out["run_rc"], out["run_out"] = cb.sh_rc(f"ampctl run {SQUARES_CIRCLES} 2>&1", timeout=30)

@@ -18,6 +18,7 @@ import math
 import re
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -29,6 +30,7 @@ import pytest
 
 from recorder_helpers import node_verify, servoamp_cmd
 from servoamp import info, mcapio, netboard, plot, qemu
+from servoamp import telemetry as tw
 from servoamp.record import RecordResult, record
 
 ENV = dict(os.environ, PYTHONUNBUFFERED="1")
@@ -52,6 +54,9 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         cb.start_servod()
         cb.start_firmware()
         out["hello"] = cb.wait_telemetry()
+        # through the forward: a wrong token and silence get no byte and are closed
+        out["probes"] = [_probe(cb.host_port, tw.encode_auth("x" * 32)), _probe(cb.host_port, b"")]
+        out["stats_probes"] = cb.stats()
         # as tests/robot/04_cycle.robot: a 10-cycle watchdog trips on TCG
         # hiccups (the servo then holds its axes in SAFESTOP): 50, resume
         cb.ampctl("param set wd_limit 50")
@@ -72,7 +77,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 
         th = threading.Thread(target=lambda: box.update(
             r=record("127.0.0.1", cb.host_port, out["path"], None, stop=stop_rec,
-                     on_progress=progress, connect_timeout=30.0)))
+                     on_progress=progress, connect_timeout=30.0, token=cb.token)))
         t0 = time.monotonic()
         th.start()
         assert on_record.wait(30), "the recorder got no cycle in 30 s"
@@ -93,7 +98,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         # servoamp record stopped with SIGINT
         sig_path = tmp / "sigint.mcap"
         p = subprocess.Popen(servoamp_cmd("record", "--connect", f"127.0.0.1:{cb.host_port}",
-                                          "-o", str(sig_path), "--json"),
+                                          "-o", str(sig_path), "--json", "--token", cb.token),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
         time.sleep(1.0)          # it connects (host time) ...
         cb.sh("sleep 2")         # ... and records 2 s of guest time
@@ -111,7 +116,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 
         th = threading.Thread(target=lambda: box2.update(
             r=record("127.0.0.1", cb.host_port, tmp / "stop.mcap", 60.0, reconnect=False,
-                     on_progress=progress)))
+                     on_progress=progress, token=cb.token)))
         th.start()
         assert enough.wait(45), "the recorder got fewer than 600 cycles in 45 s"
         cb.sh("kill -TERM $(pidof servod); i=0; while pidof servod >/dev/null && [ $i -lt 100 ];"
@@ -121,6 +126,34 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         out["servod_log_end"] = cb.sh(f"tail -n 3 {netboard.SERVOD_LOG}")
         out["board_s"] = time.monotonic() - t_boot
     return out
+
+
+def _probe(port: int, first: bytes, timeout: float = 15.0) -> tuple[bool, int]:
+    """(closed by servod within timeout, bytes received) for a client that
+    sends first and then only reads."""
+    got = 0
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+        if first:
+            s.sendall(first)
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            s.settimeout(max(0.05, end - time.monotonic()))
+            try:
+                d = s.recv(4096)
+            except socket.timeout:
+                return False, got
+            except ConnectionResetError:
+                return True, got
+            if not d:
+                return True, got
+            got += len(d)
+    return False, got
+
+
+def test_wrong_token_and_silence_are_refused(run: dict[str, Any]) -> None:
+    assert run["probes"] == [(True, 0), (True, 0)], run["probes"]
+    st = run["stats_probes"]
+    assert int(st["telem.auth_failed"]) >= 1 and int(st["telem.auth_timeout"]) >= 1, st
 
 
 def _cycles(path: Path) -> list[tuple[int, dict[str, Any]]]:

@@ -29,13 +29,16 @@ def test_transport_unit(san: str) -> None:
     assert "Sanitizer" not in out and "runtime error" not in out
 
 
-def _read_stream(port: int, timeout: float = 30, stall: float = 0.0) -> list[tuple[int, object]]:
-    """A minimal client: decodes every frame until EOF (after the final STATS);
-    stall: seconds it does not read after connecting (a slow client)."""
+def _read_stream(port: int, timeout: float = 30, stall: float = 0.0,
+                 token: str | None = None) -> list[tuple[int, object]]:
+    """A minimal client: AUTH, then decodes every frame until EOF (after the
+    final STATS); stall: seconds it does not read after connecting (a slow
+    client)."""
     msgs: list[tuple[int, object]] = []
     sp = tw.FrameSplitter()
     hello = None
     with socket.create_connection(("127.0.0.1", port), timeout=timeout) as s:
+        s.sendall(tw.encode_auth(token))
         if stall:
             time.sleep(stall)
         end = time.monotonic() + timeout
@@ -169,6 +172,7 @@ def test_ipv6_loopback() -> None:
         pytest.skip("no IPv6 loopback here")
     port = int(line.split()[2])
     with socket.create_connection(("::1", port), timeout=10) as s:
+        s.sendall(tw.encode_auth())
         data = b""
         while True:
             d = s.recv(65536)

@@ -11,6 +11,7 @@
  *              [--restart-at CYCLE] [--param-every N] [--log-every N]
  *              [--queues-every N] [--burst] [--linger-ms MS] [--id NAME]
  *              [--client-buffer BYTES] [--stats-ms MS] [--start-cycle C]
+ *              [--token STR] [--auth-ms MS] [--stall-ms MS]
  *
  * Prints "listening 127.0.0.1 PORT" (flushed) when ready, and at the end one
  * JSON line: {"pushed":..,"dropped":..,"drained":..,"client_lost":..,...}.
@@ -49,10 +50,12 @@ struct opts {
 	double rate, wait_timeout;
 	unsigned long long cycles, restart_at, param_every, log_every, queues_every, start_cycle;
 	int burst;
+	const char *token;
+	unsigned auth_ms, stall_ms;
 };
 
 struct app {
-	unsigned long long exchanges, stale, missed, restarts;
+	_Atomic unsigned long long exchanges, stale, missed, restarts;	/* read by the drain thread */
 };
 
 static unsigned app_counters(void *arg, struct telem_counter *out, unsigned max)
@@ -84,14 +87,15 @@ static int usage(void)
 	fprintf(stderr, "usage: telem_feed [--addr A] [--port P] [--cycles N] [--rate HZ] [--axes N] "
 			"[--ring CAP] [--wait-clients K] [--wait-timeout S] [--restart-at C] "
 			"[--param-every N] [--log-every N] [--queues-every N] [--burst] "
-			"[--linger-ms MS] [--id NAME] [--client-buffer B] [--stats-ms MS] [--start-cycle C]\n");
+			"[--linger-ms MS] [--id NAME] [--client-buffer B] [--stats-ms MS] [--start-cycle C] "
+			"[--token STR] [--auth-ms MS] [--stall-ms MS]\n");
 	return 2;
 }
 
 int main(int argc, char **argv)
 {
 	struct opts o = { "127.0.0.1", "telem_feed", 0, 4, 4096, 0, 1u << 20, 500, 2000,
-			  1000.0, 10.0, 1000, 0, 0, 0, 0, 0, 0 };
+			  1000.0, 10.0, 1000, 0, 0, 0, 0, 0, 0, NULL, 0, 0 };
 	struct app app = { 0, 0, 0, 0 };
 	struct telem_cfg cfg;
 	static struct telem t;
@@ -115,6 +119,8 @@ int main(int argc, char **argv)
 		NUM("--client-buffer", client_buffer, (unsigned)atoi)
 		NUM("--stats-ms", stats_ms, (unsigned)atoi)
 		NUM("--linger-ms", linger_ms, (unsigned)atoi)
+		NUM("--auth-ms", auth_ms, (unsigned)atoi)
+		NUM("--stall-ms", stall_ms, (unsigned)atoi)
 		NUM("--rate", rate, atof)
 		NUM("--wait-timeout", wait_timeout, atof)
 		NUM("--cycles", cycles, STRTOULL)
@@ -125,6 +131,7 @@ int main(int argc, char **argv)
 		NUM("--start-cycle", start_cycle, STRTOULL)
 		if (!strcmp(a, "--addr") && v) { o.addr = v; i++; continue; }
 		if (!strcmp(a, "--id") && v) { o.id = v; i++; continue; }
+		if (!strcmp(a, "--token") && v) { o.token = v; i++; continue; }
 		if (!strcmp(a, "--burst")) { o.burst = 1; continue; }
 		return usage();
 	}
@@ -143,6 +150,14 @@ int main(int argc, char **argv)
 	cfg.client_buffer = o.client_buffer;
 	cfg.stats_interval_ms = o.stats_ms;
 	cfg.linger_ms = o.linger_ms;
+	if (o.token) {
+		cfg.token = o.token;
+		cfg.token_len = (uint32_t)strlen(o.token);
+	}
+	if (o.auth_ms)
+		cfg.auth_timeout_ms = o.auth_ms;
+	if (o.stall_ms)
+		cfg.stall_timeout_ms = o.stall_ms;
 	cfg.app_counters = app_counters;
 	cfg.app_arg = &app;
 	rc = telem_init(&t, &cfg);
@@ -285,12 +300,16 @@ int main(int argc, char **argv)
 	printf("{\"sent\":%llu,\"pushed\":%llu,\"dropped\":%llu,\"drained\":%llu,"
 	       "\"client_lost\":%llu,\"events\":%llu,\"events_dropped\":%llu,"
 	       "\"bytes_sent\":%llu,\"clients_total\":%llu,\"ring_high_water\":%u,"
-	       "\"first_cycle\":%llu,\"last_cycle\":%llu}\n",
+	       "\"first_cycle\":%llu,\"last_cycle\":%llu,\"auth_failed\":%llu,\"auth_timeout\":%llu,"
+	       "\"evicted\":%llu,\"refused\":%llu,\"stalled\":%llu,\"protocol\":%llu}\n",
 	       sent, (unsigned long long)st.pushed, (unsigned long long)st.dropped,
 	       (unsigned long long)st.drained, (unsigned long long)st.client_lost,
 	       (unsigned long long)st.events, (unsigned long long)st.events_dropped,
 	       (unsigned long long)st.bytes_sent, (unsigned long long)st.clients_total,
-	       st.ring_high_water, o.start_cycle, o.start_cycle + (sent ? sent - 1 : 0));
+	       st.ring_high_water, o.start_cycle, o.start_cycle + (sent ? sent - 1 : 0),
+	       (unsigned long long)st.auth_failed, (unsigned long long)st.auth_timeout,
+	       (unsigned long long)st.evicted, (unsigned long long)st.refused,
+	       (unsigned long long)st.stalled, (unsigned long long)st.protocol);
 	fflush(stdout);
 	telem_destroy(&t);
 	return 0;
