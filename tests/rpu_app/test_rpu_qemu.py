@@ -192,12 +192,13 @@ def _symbol_of(elf_path, name):
 
 
 def test_svc_stack_overflow_faults_on_guard(rpu_build, board_cfg, tmp_path):
-    """Issue 13, item 5: CPU1's SVC stack pointer is moved to 8 bytes above
-    the stack's bottom (as a deep nesting would leave it); the next push
-    (the next interrupt's entry at the latest) lands in the guard page: a
-    data abort reported as an SVC stack overflow, CRSH, and the translation
-    table below is intact (the core still stops, parks and restarts). With
-    the old layout the push silently rewrote the table's last entries."""
+    """Issue 13, item 5: CPU1, in SVC mode, is sent into the firmware's
+    stack-eating recursion (the SP_DEBUG_STACK hook) with its SVC stack
+    pointer 8 bytes above the stack's bottom; its first frame lands in the
+    guard page: a data abort reported as an SVC stack overflow, CRSH, and
+    the translation tables below are intact (the core still stops, parks
+    and restarts). With the old layout the frame silently rewrote the
+    table's last entries."""
     elf = rpu_build / "servo.elf"
     entry = entry_of(elf)
     bottom = _symbol_of(elf, "__svc_stack_bottom")
@@ -206,16 +207,27 @@ def test_svc_stack_overflow_faults_on_guard(rpu_build, board_cfg, tmp_path):
     with QemuRpu(tmp_path / "q", rpu_build / "qemu-stub.elf", elf) as q:
         q.wait_uart(r"^running:", timeout=8)
         g = q.attach_gdb()
-        for _ in range(20):  # catch CPU1 in SVC mode (main loop or a handler)
+        with open(elf, "rb") as f:
+            sm = ELFFile(f).get_section_by_name(".symtab").get_symbol_by_name("servo_main")[0]
+        # catch CPU1 in its main loop (SVC mode, no interrupt in service:
+        # leaving a handler half-way would leave its interrupt active)
+        for _ in range(50):
             g.interrupt()
             g.select_cpu(1)
-            if g.read_reg(25) & 0x1F == 0x13:
+            pc = g.read_reg(15)
+            if g.read_reg(25) & 0x1F == 0x13 and sm["st_value"] <= pc < sm["st_value"] + sm["st_size"]:
                 break
             g.cont()
             time.sleep(0.01)
         else:
-            pytest.fail("CPU1 never seen in SVC mode")
-        g.command("Pd=" + (bottom + 8).to_bytes(4, "little").hex())
+            pytest.fail("CPU1 never seen in its main loop")
+        # CPU1 (SVC mode) calls the debug recursion (SP_DEBUG_STACK's)
+        # with 8 bytes of stack left, as a deep nesting would leave it
+        le = lambda v: v.to_bytes(4, "little").hex()  # noqa: E731
+        g.command("P0=" + le(0))
+        g.command("P1=" + le(100))
+        g.command("Pd=" + le(bottom + 8))
+        g.command("Pf=" + le(_symbol_of(elf, "stack_eat")))
         g.cont()
         q.wait_word(status, CRSH, timeout=3)
         m = q.wait_uart(r"^FAULT: SVC stack overflow: access at ([0-9a-f]{8}) in the guard page "
