@@ -58,6 +58,12 @@ enum sp_debug {
 	 * value (outside every parameter's range; NaN for the floats); the
 	 * request itself is served as usual. */
 	SP_DEBUG_BADPARAM = 4u,
+	/* The next cycle handler (an interrupt, on the SVC stack like every
+	 * nested handler) recurses until the SVC stack overflows into its
+	 * guard page: a data abort, reported by the fault handler as
+	 * "SVC stack overflow" with CRSH, then as SP_DEBUG_CRASH. Refused
+	 * (SP_E_STATE) by a firmware built without the MMU (no guard). */
+	SP_DEBUG_STACK = 5u,
 };
 
 /* Application error statuses (struct amp_msg.status), beside amp_lib's
@@ -163,6 +169,11 @@ struct sp_status {
 	uint32_t mbox_served;
 	uint32_t linux_cycle;	/* Linux cycle number in the last commands consumed */
 	uint32_t hb_linux_cycles;	/* cycles since Linux's heartbeat last moved */
+	/* SVC stack (main loop and every interrupt handler, nested): deepest
+	 * use since start (high-water mark of the painted stack) and size, in
+	 * bytes. An overflow faults on the guard page below it. */
+	uint32_t svc_stack_used;
+	uint32_t svc_stack_size;
 };
 
 /* ---- periodic records ----------------------------------------------------- */

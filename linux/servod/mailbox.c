@@ -82,8 +82,19 @@ int servo_status(struct servod *sd, struct sp_status *s, char *msg, size_t n)
 
 	if (rc)
 		return rc;
-	if (status || len != sizeof(*s)) {
+	if (status) {
 		snprintf(msg, n, "status: %s", sp_strerror(status));
+		return SE_SERVO;
+	}
+	/* a firmware of another protocol revision (or a garbled answer) */
+	if (len != sizeof(*s)) {
+		snprintf(msg, n, "status: answer of %u bytes, expected %zu (firmware and servod differ?)", len,
+			 sizeof(*s));
+		return SE_SERVO;
+	}
+	if (s->svc_stack_used > s->svc_stack_size) {
+		snprintf(msg, n, "status: svc_stack_used %u over svc_stack_size %u", s->svc_stack_used,
+			 s->svc_stack_size);
 		return SE_SERVO;
 	}
 	return SE_OK;
@@ -145,8 +156,9 @@ static int req_resume(struct servod *sd, struct out *o, int argc, char **argv, c
 }
 SERVOD_REQUEST("resume", req_resume);
 
-/* "debug hang|crash|fault|badparam": the servo hangs, crashes, faults and
- * hangs, or gives one out-of-range parameter answer, on purpose (tests). */
+/* "debug hang|crash|fault|badparam|stack": the servo hangs, crashes, faults
+ * and hangs, gives one out-of-range parameter answer, or overflows its SVC
+ * stack into the guard page (a crash), on purpose (tests). */
 static int req_debug(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
 {
 	uint32_t w;
@@ -159,8 +171,10 @@ static int req_debug(struct servod *sd, struct out *o, int argc, char **argv, ch
 		w = SP_DEBUG_FAULT;
 	else if (argc == 2 && !strcmp(argv[1], "badparam"))
 		w = SP_DEBUG_BADPARAM;
+	else if (argc == 2 && !strcmp(argv[1], "stack"))
+		w = SP_DEBUG_STACK;
 	else {
-		snprintf(msg, n, "usage: debug hang|crash|fault|badparam");
+		snprintf(msg, n, "usage: debug hang|crash|fault|badparam|stack");
 		return SE_USAGE;
 	}
 	return simple_command(sd, o, argv[0], SP_CMD_DEBUG, w, 4, msg, n);

@@ -16,6 +16,7 @@
 #include "gic.h"
 #include "irq.h"
 #include "log.h"
+#include "mmu.h"
 #include "servo.h"
 #include "ttc.h"
 
@@ -24,6 +25,8 @@ static const char *const kind_name[] = {
 };
 
 static volatile uint32_t in_fault;
+
+#define KIND_DATA_ABORT 4u
 
 void fault_report(uint32_t kind, const uint32_t *frame)
 {
@@ -35,9 +38,18 @@ void fault_report(uint32_t kind, const uint32_t *frame)
 		log_printf("FAULT: %s at pc=%08x spsr=%08x mode=%02x nest=%u\n",
 			   kind_name[kind < 6u ? kind : 0u], (unsigned)frame[14], (unsigned)frame[0],
 			   (unsigned)(frame[0] & 0x1fu), (unsigned)irq_nest_now());
+		uint32_t dfar = CP15_READ(0, c6, c0, 0);
+
 		log_printf("FAULT: dfsr=%08x dfar=%08x ifsr=%08x ifar=%08x\n",
-			   (unsigned)CP15_READ(0, c5, c0, 0), (unsigned)CP15_READ(0, c6, c0, 0),
+			   (unsigned)CP15_READ(0, c5, c0, 0), (unsigned)dfar,
 			   (unsigned)CP15_READ(0, c5, c0, 1), (unsigned)CP15_READ(0, c6, c0, 2));
+		/* The no-access page below the SVC stack (servo.ld, mmu.c). */
+		if (kind == KIND_DATA_ABORT && mmu_enabled() && dfar >= mmu_stack_guard_start() &&
+		    dfar < mmu_stack_guard_end())
+			log_printf("FAULT: SVC stack overflow: access at %08x in the guard page [%08x, %08x) "
+				   "below the %u-byte SVC stack\n",
+				   (unsigned)dfar, (unsigned)mmu_stack_guard_start(),
+				   (unsigned)mmu_stack_guard_end(), (unsigned)svc_stack_size());
 		for (unsigned i = 0; i < 13u; i += 4u)
 			log_printf("FAULT: r%u..: %08x %08x %08x %08x\n", i,
 				   (unsigned)frame[1 + i], (unsigned)(i + 1u < 13u ? frame[2 + i] : 0u),

@@ -77,6 +77,8 @@ const char *link_backend(void)
 #include "gtimer.h"
 #include "link.h"
 #include "log.h"
+#include "mmu.h"
+#include "servo.h"
 #include "servoamp/servo_proto.h"
 #include "ttc.h"
 
@@ -84,8 +86,8 @@ const char *link_backend(void)
 
 static struct amp_servo amp;
 static volatile int attached;
-static volatile uint32_t local_hb, hang, crash_req, linux_cycle, bad_answer, fault_req;
-static uint32_t next_try;
+static volatile uint32_t local_hb, hang, crash_req, linux_cycle, bad_answer, fault_req, stack_req;
+static uint32_t next_try, stack_pending;
 static int last_err;
 static struct amp_fb_axis fb[AMP_MAX_AXES];
 
@@ -103,7 +105,8 @@ volatile struct link_diag link_diag;
 void link_init(void)
 {
 	attached = 0;
-	local_hb = hang = crash_req = linux_cycle = bad_answer = fault_req = 0;
+	local_hb = hang = crash_req = linux_cycle = bad_answer = fault_req = stack_req = 0;
+	stack_pending = 0;
 	next_try = 0;
 	last_err = 1;	/* nothing reported yet */
 	amp = (struct amp_servo){ 0 };
@@ -124,12 +127,34 @@ static void enter_safestop(uint32_t reason, int write_line)
 		amp_servo_set_state(&amp, AMP_SSTATE_SAFESTOP, app_fault());
 }
 
+/*
+ * Debug (SP_DEBUG_STACK): recurse until the SVC stack overflows. Each frame
+ * is 256 bytes of locals (well below the 4 KiB guard page, so the guard is
+ * always touched, never stepped over) and passes their address to the
+ * callee, so the frame must live across the call: no tail call, no loop.
+ * The depth is bounded (twice the stack) in case no guard stops it.
+ */
+static __attribute__((noinline, noclone)) uint32_t stack_eat(volatile uint32_t *up, uint32_t depth)
+{
+	volatile uint32_t pad[64];
+
+	pad[0] = up ? up[0] + 1u : 0u;
+	pad[63] = depth;
+	if (!depth)
+		return pad[0];
+	return stack_eat(pad, depth - 1u) + pad[63];
+}
+
 void link_cycle(uint32_t t_entry, uint32_t lat_ns)
 {
 	struct amp_rx_info rx;
 	uint32_t t1, t2, t3, n, was_ss;
 	int rc;
 
+	if (stack_req) {
+		stack_req = 0;
+		(void)stack_eat(0, 2u * svc_stack_size() / (64u * 4u));
+	}
 	if (hang)
 		return;	/* debug: stuck in the cycle, no heartbeat, no exchange */
 	local_hb++;
@@ -309,6 +334,8 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		s.safestops = app_safestops();
 		s.stop_cycles = app_stop_cycles();
 		s.mbox_served = amp.st.mbox_ok;
+		s.svc_stack_used = svc_stack_used();
+		s.svc_stack_size = svc_stack_size();
 		for (uint32_t i = 0; i < sizeof(s) / 4u; i++)
 			out[i] = ((uint32_t *)&s)[i];
 		*len = sizeof(s);
@@ -336,6 +363,11 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		} else if (what == SP_DEBUG_FAULT) {
 			log_printf("debug: fault requested: servo line FAULT, then cycle work and heartbeat stop\n");
 			fault_req = 1;	/* after the answer (link_poll) */
+		} else if (what == SP_DEBUG_STACK) {
+			if (!mmu_enabled())
+				return SP_E_STATE;	/* no guard page: it would be silent */
+			log_printf("debug: SVC stack overflow requested: the next cycle handler recurses into the guard page\n");
+			stack_pending = 1;	/* armed after the answer (link_poll) */
 		} else if (what == SP_DEBUG_BADPARAM) {
 			log_printf("debug: the next parameter answer carries an out-of-range value\n");
 			bad_answer = 1;
@@ -368,6 +400,10 @@ void link_poll(uint32_t cycle, const struct link_stats *ls)
 			int32_t st = serve(&req, out, &len, ls);
 
 			(void)amp_servo_mbox_respond(&amp, st, out, len);
+		}
+		if (stack_pending) {
+			stack_pending = 0;
+			stack_req = 1;	/* the next cycle handler overflows */
 		}
 		if (fault_req) {
 			fault_req = 0;

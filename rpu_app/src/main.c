@@ -116,6 +116,16 @@ static uint32_t stack_used(uint32_t *bottom, uint32_t *top)
 	return (uint32_t)((uintptr_t)top - (uintptr_t)p);
 }
 
+uint32_t svc_stack_used(void)
+{
+	return stack_used(__svc_stack_bottom, __svc_stack_top);
+}
+
+uint32_t svc_stack_size(void)
+{
+	return (uint32_t)((uintptr_t)__svc_stack_top - (uintptr_t)__svc_stack_bottom);
+}
+
 static void print_irq_stats(uint32_t id)
 {
 	struct irq_stats st;
@@ -148,7 +158,7 @@ static void print_stats(void)
 		   link_backend(), link_attached(), (unsigned)link_heartbeat(),
 		   (unsigned)irq_spurious(), (unsigned)irq_unhandled(), (unsigned)ls.trace_wraps,
 		   (unsigned)ls.uart_dropped,
-		   (unsigned)stack_used(__svc_stack_bottom, __svc_stack_top));
+		   (unsigned)svc_stack_used());
 }
 
 static int stop_requested(void)

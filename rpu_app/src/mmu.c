@@ -20,6 +20,13 @@
  *                  accesses with DMB.
  *  devices         Shareable Device, execute-never.
  *
+ * Stack guard: the 1 MiB section that holds the SVC stack's guard page
+ * (servo.ld, __stack_guard_start/end) is mapped through a second-level
+ * table of 4 KiB small pages with the section's own attributes, except the
+ * guard pages, whose entries are faults (no access at any level). An SVC
+ * stack overflow therefore takes a data abort at the guard (fault.c names
+ * it) instead of rewriting the translation tables below the stacks.
+ *
  * Translation-table walks are non-cacheable (TTBR0 RGN/IRGN = 0) and the
  * table is written while the D-cache is still off, so no maintenance of
  * the table itself is needed. Domain 0, client (permissions checked), full
@@ -42,6 +49,22 @@
 #define SD_AP_RW    (3u << 10)	/* AP[1:0] = 11, AP[2] = 0: RW at any PL */
 #define SD_TEX(x)   ((uint32_t)(x) << 12)
 #define SD_S        (1u << 16)
+#define SD_NG       (1u << 17)
+#define SD_AP2      (1u << 15)
+
+/* Short-descriptor first-level page-table entry, small-page bits. */
+#define PT_L1_COARSE 0x1u
+#define SP_PAGE      0x2u	/* small page; bit 0 is XN */
+#define SP_XN        (1u << 0)
+#define SP_B         (1u << 2)
+#define SP_C         (1u << 3)
+#define SP_AP_SHIFT  4	/* AP[1:0] */
+#define SP_TEX_SHIFT 6
+#define SP_AP2       (1u << 9)
+#define SP_S         (1u << 10)
+#define SP_NG        (1u << 11)
+#define PAGE_SHIFT   12
+#define L2_ENTRIES   256u
 
 /* Attribute sets used by BOARD_MMU_REGIONS. */
 #define MMU_NORMAL_WB (SD_SECTION | SD_AP_RW | SD_TEX(4) | SD_B)	/* inner WB-WA, outer NC */
@@ -54,6 +77,10 @@
 #define SCTLR_I (1u << 12)
 
 static uint32_t l1_table[L1_ENTRIES] __attribute__((aligned(16384), section(".mmu_table")));
+static uint32_t l2_guard_table[L2_ENTRIES] __attribute__((aligned(1024), section(".mmu_l2_table")));
+
+/* servo.ld: the no-access page(s) directly below the SVC stack. */
+extern uint32_t __stack_guard_start[], __stack_guard_end[];
 
 void dcache_setway(uint32_t op);
 
@@ -61,6 +88,57 @@ static void map(uint32_t base, uint32_t size, uint32_t attr)
 {
 	for (uint32_t s = base >> SECTION_SHIFT; s < ((base + (size - 1u)) >> SECTION_SHIFT) + 1u; s++)
 		l1_table[s] = (s << SECTION_SHIFT) | attr;
+}
+
+/* Same memory type, permissions and XN as a section descriptor, for a
+ * small page. */
+static uint32_t small_page_attr(uint32_t sd)
+{
+	uint32_t a = SP_PAGE;
+
+	a |= sd & (SD_B | SD_C);
+	if (sd & SD_XN)
+		a |= SP_XN;
+	a |= ((sd >> 10) & 3u) << SP_AP_SHIFT;
+	a |= ((sd >> 12) & 7u) << SP_TEX_SHIFT;
+	if (sd & SD_AP2)
+		a |= SP_AP2;
+	if (sd & SD_S)
+		a |= SP_S;
+	if (sd & SD_NG)
+		a |= SP_NG;
+	return a;
+}
+
+/* Replace the section holding the stack guard by a second-level table:
+ * 4 KiB pages as the section was, guard pages faulting. */
+static void map_stack_guard(void)
+{
+	uint32_t g0 = (uint32_t)(uintptr_t)__stack_guard_start;
+	uint32_t g1 = (uint32_t)(uintptr_t)__stack_guard_end;
+	uint32_t sec = g0 >> SECTION_SHIFT;
+	uint32_t sd = l1_table[sec];
+	uint32_t attr = small_page_attr(sd);
+
+	if ((sd & 3u) != SD_SECTION)
+		return;	/* not mapped: every page faults already */
+	for (uint32_t i = 0; i < L2_ENTRIES; i++) {
+		uint32_t va = (sec << SECTION_SHIFT) | (i << PAGE_SHIFT);
+
+		l2_guard_table[i] = (va >= g0 && va < g1) ? 0u : (va | attr);
+	}
+	/* coarse table, domain 0, Secure (NS = 0) */
+	l1_table[sec] = (uint32_t)(uintptr_t)l2_guard_table | PT_L1_COARSE;
+}
+
+uint32_t mmu_stack_guard_start(void)
+{
+	return (uint32_t)(uintptr_t)__stack_guard_start;
+}
+
+uint32_t mmu_stack_guard_end(void)
+{
+	return (uint32_t)(uintptr_t)__stack_guard_end;
 }
 
 int mmu_enabled(void)
@@ -84,6 +162,7 @@ void mmu_init(void)
 #define X(base, size, attr) map((base), (size), (attr));
 	BOARD_MMU_REGIONS(X)
 #undef X
+	map_stack_guard();
 	dsb();
 
 	CP15_WRITE(0, c2, c0, 2, 0);			/* TTBCR: N = 0, TTBR0 only */

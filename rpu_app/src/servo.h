@@ -13,4 +13,9 @@ __attribute__((noreturn)) void fault_report(uint32_t kind, const uint32_t *frame
 __attribute__((noreturn)) void servo_quiesce_and_park(void);
 __attribute__((noreturn)) void cpu_park(uint32_t park, uint32_t status_addr, uint32_t status);
 
+/* SVC stack (main loop and every interrupt handler, nested): high-water
+ * mark in bytes (painted at start, main.c) and size (servo.ld). */
+uint32_t svc_stack_used(void);
+uint32_t svc_stack_size(void);
+
 #endif

@@ -5,7 +5,8 @@ Documentation     The cycle end to end on the emulated board, in ONE boot:
 ...               exchange at 1 kHz and 250 us, the parameter service
 ...               (round trip of every parameter, error answers), stop/start
 ...               through sysfs while servod runs, firmware hang, crash and
-...               FAULT-then-hang detected by servod and recovered by remoteproc with the
+...               FAULT-then-hang and an SVC stack overflow (guard page)
+...               detected by servod and recovered by remoteproc with the
 ...               parameters restored, out-of-range parameter answers refused,
 ...               servod killed -> safe stop reported by
 ...               the servo. On virtual time (-icount, the default) no cycle
@@ -422,6 +423,47 @@ Faulted Then Hung Firmware Is Detected And Recovered
     Param Should Be    pos_kp    61.5
     Param Should Be    wd_limit    10
     Ampctl    param set wd_limit ${K}
+    ${r}=    Exchange Window    1
+    Exchange Should Run    ${r}
+
+SVC Stack Overflow Is A Crash, Not Silent, And Is Recovered
+    [Documentation]    Issue 13, item 5: the SVC stack (main loop and every
+    ...    nested interrupt handler) has a no-access guard page below it,
+    ...    between it and the MMU tables. `ampctl stats` shows its high-water
+    ...    mark and size. `debug stack` makes the next cycle handler recurse
+    ...    into the guard: a data abort, which the fault handler reports on
+    ...    the servo UART as an SVC stack overflow (CRSH, interrupts masked,
+    ...    so the heartbeat stops); servod detects the stall, remoteproc
+    ...    recovers the firmware, servod restores every parameter.
+    ${n}=    Servod Log Count    recovery complete
+    ${stalled}=    Servod Log Count    servo stalled
+    ${a}=    Stats
+    Should Be Equal As Integers    ${a}[servo.svc_stack_size]    16384
+    Should Be True    0 < ${a}[servo.svc_stack_used] < ${a}[servo.svc_stack_size]
+    Log    SVC stack high-water mark before: ${a}[servo.svc_stack_used] of ${a}[servo.svc_stack_size] bytes    console=True
+    Clear Terminal Tester Report    ${SERVO_UART}
+    ${out}=    Ampctl    debug stack
+    Should Contain    ${out}    debug: ok
+    ${line}=    Wait For Line On Uart    FAULT: SVC stack overflow    testerId=${SERVO_UART}    timeout=10 s
+    Log    ${line}    console=True
+    Should Match Regexp    ${line}    access at [0-9a-f]{8} in the guard page \\[[0-9a-f]{8}, [0-9a-f]{8}\\) below the 16384-byte SVC stack
+    Wait For Line On Uart    FAULT: waiting for STOP    testerId=${SERVO_UART}    timeout=10 s
+    Wait For Servod Log    servo stalled    ${stalled + 1}
+    Wait For Servod Log    recovery complete    ${n + 1}
+    Execute Shell Command    sleep 0.3
+    ${b}=    Stats
+    ${rec}=    Delta    ${a}    ${b}    linux.recoveries
+    ${att}=    Delta    ${a}    ${b}    servo.attach_count
+    Should Be True    ${rec} >= 1
+    Should Be Equal As Integers    ${att}    ${rec}
+    Dmesg Should Contain    crash reported by user space
+    Should Be Equal    ${b}[servo.state]    RUNNING
+    FOR    ${name}    ${value}    IN    &{TEST_PARAMS}
+        Param Should Be    ${name}    ${value}
+    END
+    # the restarted firmware painted its stack again: a normal mark
+    Should Be True    0 < ${b}[servo.svc_stack_used] < ${b}[servo.svc_stack_size]
+    Log    SVC stack high-water mark after the recovery: ${b}[servo.svc_stack_used] bytes    console=True
     ${r}=    Exchange Window    1
     Exchange Should Run    ${r}
 

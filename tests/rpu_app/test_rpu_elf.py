@@ -169,3 +169,28 @@ def test_build_options(tmp_path, toolchain, board_cfg, opts):
             for s in elf.iter_segments():
                 if s["p_type"] == "PT_LOAD":
                     assert lo <= s["p_paddr"] and s["p_paddr"] + s["p_memsz"] <= hi
+
+
+@pytest.mark.parametrize("name", VARIANTS)
+def test_svc_stack_guard_between_tables_and_stack(rpu_build, name):
+    """Issue 13, item 5: a 4 KiB-aligned guard page (mapped no-access by
+    mmu.c) lies directly below the SVC stack and above the translation
+    tables, inside one 1 MiB section (one second-level table): the SVC stack
+    cannot grow into the tables without a data abort."""
+    f, elf = open_elf(rpu_build / name)
+    with f:
+        g0 = _symbol(elf, "__stack_guard_start")["st_value"]
+        g1 = _symbol(elf, "__stack_guard_end")["st_value"]
+        bottom = _symbol(elf, "__svc_stack_bottom")["st_value"]
+        top = _symbol(elf, "__svc_stack_top")["st_value"]
+        l1 = _symbol(elf, "l1_table")
+        l2 = _symbol(elf, "l2_guard_table")
+        assert g0 % 4096 == 0 and g1 - g0 >= 4096 and (g1 - g0) % 4096 == 0
+        assert g1 == bottom and top - bottom == 16 * 1024
+        assert g0 >> 20 == (g1 - 1) >> 20
+        assert l1["st_value"] % 16384 == 0 and l2["st_value"] % 1024 == 0
+        assert l1["st_value"] + l1["st_size"] <= g0 and l2["st_value"] + l2["st_size"] <= g0
+        # nothing else lives in the guard page
+        for s in elf.get_section_by_name(".symtab").iter_symbols():
+            if s["st_size"] and s["st_info"]["type"] == "STT_OBJECT":
+                assert not (s["st_value"] < g1 and s["st_value"] + s["st_size"] > g0), s.name

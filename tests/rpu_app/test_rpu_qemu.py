@@ -186,6 +186,63 @@ def test_crash_is_reported_and_stoppable(rpu_build, board_cfg, tmp_path):
         q.wait_uart(STATS_RE, timeout=8)
 
 
+def _symbol_of(elf_path, name):
+    with open(elf_path, "rb") as f:
+        return ELFFile(f).get_section_by_name(".symtab").get_symbol_by_name(name)[0]["st_value"]
+
+
+def test_svc_stack_overflow_faults_on_guard(rpu_build, board_cfg, tmp_path):
+    """Issue 13, item 5: CPU1, in SVC mode, is sent into the firmware's
+    stack-eating recursion (the SP_DEBUG_STACK hook) with its SVC stack
+    pointer 8 bytes above the stack's bottom; its first frame lands in the
+    guard page: a data abort reported as an SVC stack overflow, CRSH, and
+    the translation tables below are intact (the core still stops, parks
+    and restarts). With the old layout the frame silently rewrote the
+    table's last entries."""
+    elf = rpu_build / "servo.elf"
+    entry = entry_of(elf)
+    bottom = _symbol_of(elf, "__svc_stack_bottom")
+    g0 = _symbol_of(elf, "__stack_guard_start")
+    status = board_cfg["BOARD_STOP_STATUS_ADDR"]
+    with QemuRpu(tmp_path / "q", rpu_build / "qemu-stub.elf", elf) as q:
+        q.wait_uart(r"^running:", timeout=8)
+        g = q.attach_gdb()
+        with open(elf, "rb") as f:
+            sm = ELFFile(f).get_section_by_name(".symtab").get_symbol_by_name("servo_main")[0]
+        # catch CPU1 in its main loop (SVC mode, no interrupt in service:
+        # leaving a handler half-way would leave its interrupt active)
+        for _ in range(50):
+            g.interrupt()
+            g.select_cpu(1)
+            pc = g.read_reg(15)
+            if g.read_reg(25) & 0x1F == 0x13 and sm["st_value"] <= pc < sm["st_value"] + sm["st_size"]:
+                break
+            g.cont()
+            time.sleep(0.01)
+        else:
+            pytest.fail("CPU1 never seen in its main loop")
+        # CPU1 (SVC mode) calls the debug recursion (SP_DEBUG_STACK's)
+        # with 8 bytes of stack left, as a deep nesting would leave it
+        le = lambda v: v.to_bytes(4, "little").hex()  # noqa: E731
+        g.command("P0=" + le(0))
+        g.command("P1=" + le(100))
+        g.command("Pd=" + le(bottom + 8))
+        g.command("Pf=" + le(_symbol_of(elf, "stack_eat")))
+        g.cont()
+        q.wait_word(status, CRSH, timeout=3)
+        m = q.wait_uart(r"^FAULT: SVC stack overflow: access at ([0-9a-f]{8}) in the guard page "
+                        r"\[([0-9a-f]{8}), ([0-9a-f]{8})\) below the 16384-byte SVC stack", timeout=3)[0]
+        assert g0 <= int(m.group(1), 16) < bottom and int(m.group(2), 16) == g0
+        assert re.search(r"^FAULT: data abort at", q.uart_text(), re.M)
+        q.wait_uart(r"^FAULT: waiting for STOP", timeout=3)
+        request_stop(q, board_cfg)
+        q.wait_word(status, PRKD, timeout=3)
+        request_start(q, board_cfg, entry)
+        q.wait_word(status, RUN, timeout=3)
+        q.wait_uart(r"^running:", count=2, timeout=5)
+        q.wait_uart(STATS_RE, timeout=8)
+
+
 def test_mmu_off_build_runs_and_parks(tmp_path, board_cfg):
     """MMU=0 (caches off) is a supported fallback: boots, cycles, parks."""
     from conftest import _make
