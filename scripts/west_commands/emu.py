@@ -21,9 +21,11 @@ bound to 127.0.0.1, the monitor on QMP; exits non-zero when a command fails.
 --net [PORT]: gem0 on QEMU user networking, with the host's 127.0.0.1:PORT
 (a free port when PORT is left out) forwarded to the guest's telemetry port
 (board.yaml "network"). Scripted mode brings eth0 up first (servoamp-net);
-interactive mode prints the command to do it. Then `servod` in the guest
-and `servoamp record --connect 127.0.0.1:PORT -o run.mcap` on the host
-record the controller.
+interactive mode prints the command to do it. servod's telemetry listens on
+the guest's loopback unless told otherwise: start it with `servod
+--telemetry 10.0.2.15:7700 --telemetry-token FILE` in the guest, then
+`servoamp record --connect 127.0.0.1:PORT --token-file FILE -o run.mcap`
+on the host records the controller (docs/telemetry.md, "Who may connect").
 
 Also runs without a west workspace: ``.venv/bin/python scripts/west_commands/emu.py``.
 """
@@ -105,6 +107,10 @@ def run(args: argparse.Namespace) -> int:
     if not commands:
         if host_port is not None:
             print(f"[emu] in the guest, bring eth0 up with: servoamp-net {board.data['network']['guest_addr']}")
+            print("[emu] then serve telemetry with: head -c 24 /dev/urandom | od -An -tx1 | tr -d ' \\n' "
+                  "> /tmp/token; chmod 600 /tmp/token; servod --telemetry 10.0.2.15:7700 --telemetry-token /tmp/token &")
+            print(f"[emu] and record on the host (token copied from the guest's /tmp/token): "
+                  f".venv/bin/servoamp record --connect 127.0.0.1:{host_port} --token TOKEN -o run.mcap")
         return qemu.interactive(board, images, accel=args.accel, extra_args=extra, clock=clock, icount=args.icount)
     return scripted(board, images, commands, args, extra, clock, net=host_port is not None)
 
