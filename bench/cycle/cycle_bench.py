@@ -117,6 +117,16 @@ def run_mode(board: qemu.Board, images: qemu.Images, clock: str, accel: str | No
         return out
 
 
+def run_info(board: qemu.Board, script: str) -> dict[str, object]:
+    """What every cycle benchmark's JSON starts with: the command, the host
+    and the QEMU binary."""
+    return {
+        "command": f"bench/cycle/{script} " + " ".join(sys.argv[1:]),
+        "host": {"cpus": os.cpu_count(), "load_avg_at_start": os.getloadavg(), "machine": platform.machine()},
+        "qemu": qemu.check_qemu(board),
+    }
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
@@ -127,9 +137,7 @@ def main() -> int:
     board = qemu.Board.load("zynq7000_qemu")
     images = qemu.prepare_images(board)
     result: dict[str, object] = {
-        "command": "bench/cycle/cycle_bench.py " + " ".join(sys.argv[1:]),
-        "host": {"cpus": os.cpu_count(), "load_avg_at_start": os.getloadavg(), "machine": platform.machine()},
-        "qemu": qemu.check_qemu(board),
+        **run_info(board, "cycle_bench.py"),
         "note": "QEMU TCG on a shared host: emulator figures, not Zynq-7000 hardware figures",
         "modes": {},
     }

@@ -31,7 +31,6 @@ import argparse
 import json
 import multiprocessing
 import os
-import platform
 import sys
 import tempfile
 import threading
@@ -43,6 +42,8 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "python"))
 
 from servoamp import info, netboard, qemu, record  # noqa: E402
+
+from cycle_bench import run_info  # noqa: E402  (same folder)
 
 
 def _busy() -> None:
@@ -118,9 +119,7 @@ def main() -> int:
     board = qemu.Board.load("zynq7000_qemu")
     images = qemu.prepare_images(board)
     result: dict[str, Any] = {
-        "command": "bench/cycle/determinism_bench.py " + " ".join(sys.argv[1:]),
-        "host": {"cpus": os.cpu_count(), "load_avg_at_start": os.getloadavg(), "machine": platform.machine()},
-        "qemu": qemu.check_qemu(board),
+        **run_info(board, "determinism_bench.py"),
         "clock": " ".join(qemu.clock_args(board, "virtual")),
         "cycles": args.cycles, "period_us": args.period_us,
         "runs": [],

@@ -71,13 +71,13 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         box: dict[str, RecordResult] = {}
         on_record, stop_rec = threading.Event(), threading.Event()
 
-        def progress(r: RecordResult) -> None:
+        def note_first_cycle(r: RecordResult) -> None:
             if r.cycles > 0:
                 on_record.set()
 
         th = threading.Thread(target=lambda: box.update(
             r=record("127.0.0.1", cb.host_port, out["path"], None, stop=stop_rec,
-                     on_progress=progress, connect_timeout=30.0, token=cb.token)))
+                     on_progress=note_first_cycle, connect_timeout=30.0, token=cb.token)))
         t0 = time.monotonic()
         th.start()
         assert on_record.wait(30), "the recorder got no cycle in 30 s"
@@ -110,13 +110,13 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         box2: dict[str, RecordResult] = {}
         enough = threading.Event()   # 600 cycles on record: then servod stops
 
-        def progress(r: RecordResult) -> None:
+        def stop_when_enough(r: RecordResult) -> None:
             if r.cycles >= 600:
                 enough.set()
 
         th = threading.Thread(target=lambda: box2.update(
             r=record("127.0.0.1", cb.host_port, tmp / "stop.mcap", 60.0, reconnect=False,
-                     on_progress=progress, token=cb.token)))
+                     on_progress=stop_when_enough, token=cb.token)))
         th.start()
         assert enough.wait(45), "the recorder got fewer than 600 cycles in 45 s"
         cb.sh("kill -TERM $(pidof servod); i=0; while pidof servod >/dev/null && [ $i -lt 100 ];"

@@ -57,6 +57,20 @@ def request_start(q, cfg, entry):
     g.cont()
 
 
+def stop_and_restart_after_fault(q, cfg, entry):
+    """After a fault report: the fault handler waits for STOP, the
+    cooperative stop parks the core (PRKD), a new start runs the firmware
+    again (RUN!, its second banner) and its cycle statistics come back."""
+    status = cfg["BOARD_STOP_STATUS_ADDR"]
+    q.wait_uart(r"^FAULT: waiting for STOP", timeout=3)
+    request_stop(q, cfg)
+    q.wait_word(status, PRKD, timeout=3)
+    request_start(q, cfg, entry)
+    q.wait_word(status, RUN, timeout=3)
+    q.wait_uart(r"^running:", count=2, timeout=5)
+    q.wait_uart(STATS_RE, timeout=8)
+
+
 def read_trace(q, cfg, tmp_path) -> bytes:
     out = tmp_path / "trace.bin"
     base = cfg["BOARD_CARVEOUT_BASE"] + cfg["BOARD_CARVEOUT_SIZE"] - cfg["BOARD_UNCACHED_SIZE"]
@@ -177,13 +191,7 @@ def test_crash_is_reported_and_stoppable(rpu_build, board_cfg, tmp_path):
         g.cont()
         q.wait_word(status, CRSH, timeout=3)
         q.wait_uart(r"^FAULT: prefetch abort at pc=00000000", timeout=3)
-        q.wait_uart(r"^FAULT: waiting for STOP", timeout=3)
-        request_stop(q, board_cfg)
-        q.wait_word(status, PRKD, timeout=3)
-        request_start(q, board_cfg, entry)
-        q.wait_word(status, RUN, timeout=3)
-        q.wait_uart(r"^running:", count=2, timeout=5)
-        q.wait_uart(STATS_RE, timeout=8)
+        stop_and_restart_after_fault(q, board_cfg, entry)
 
 
 def _symbol_of(elf_path, name):
@@ -234,13 +242,7 @@ def test_svc_stack_overflow_faults_on_guard(rpu_build, board_cfg, tmp_path):
                         r"\[([0-9a-f]{8}), ([0-9a-f]{8})\) below the 16384-byte SVC stack", timeout=3)[0]
         assert g0 <= int(m.group(1), 16) < bottom and int(m.group(2), 16) == g0
         assert re.search(r"^FAULT: data abort at", q.uart_text(), re.M)
-        q.wait_uart(r"^FAULT: waiting for STOP", timeout=3)
-        request_stop(q, board_cfg)
-        q.wait_word(status, PRKD, timeout=3)
-        request_start(q, board_cfg, entry)
-        q.wait_word(status, RUN, timeout=3)
-        q.wait_uart(r"^running:", count=2, timeout=5)
-        q.wait_uart(STATS_RE, timeout=8)
+        stop_and_restart_after_fault(q, board_cfg, entry)
 
 
 def test_mmu_off_build_runs_and_parks(tmp_path, board_cfg):
