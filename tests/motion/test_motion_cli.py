@@ -129,3 +129,19 @@ def test_threaded_cli_realtime_and_trace(tmp_path: Path) -> None:
     assert header == ["t_us", "stream_bytes", "blocks", "segments", "planned",
                       "profiles", "setpoints"]
     assert len(samples) > 10
+
+
+@pytest.mark.parametrize("args,why", [
+    (["--axes", "9"], "--axes: '9' is not a number in [1, 6]"),
+    (["--vmax", "12abc"], "--vmax: '12abc' is not a number"),
+    (["--period-us", ""], "--period-us: '' is not a number"),
+    (["--policy", "edf"], "--policy: 'edf' is neither hybrid nor fifo"),
+    (["--chunk", "0"], "--chunk: '0' is not a number"),
+], ids=["axes", "trailing", "empty", "policy", "chunk"])
+def test_bad_option_values_refused(tmp_path: Path, args: list[str], why: str) -> None:
+    """A value the CLI cannot use is refused with the option's name, before
+    anything runs (atoi() used to take '12abc' as 12 and '' as 0)."""
+    proc, rows = run_cli(args, PROGRAM, tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    assert why in proc.stderr
+    assert rows == []
