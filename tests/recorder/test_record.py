@@ -171,8 +171,17 @@ def _record_proc(port: int, out: Path, *extra: str) -> subprocess.Popen[str]:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
 
 
-def _wait_cycles(out: Path, feed: Feed, seconds: float) -> None:
-    time.sleep(seconds)
+def _wait_cycles(out: Path, feed: Feed, rp: subprocess.Popen[str], n: int) -> None:
+    """Until n cycles are on disk (flushed chunks), not a fixed sleep: a loaded
+    host may need far longer to start the recorder. The limit only stops a hang."""
+    end = time.monotonic() + 120
+    while True:
+        got = sum(1 for _ in mcapio.iter_messages(out, [mcapio.T_CYCLE])) if out.exists() else 0
+        if got >= n:
+            break
+        assert rp.poll() is None, rp.communicate()
+        assert time.monotonic() < end, f"{got} of {n} cycles on disk after 120 s"
+        time.sleep(0.2)
     assert feed.proc.poll() is None
 
 
@@ -183,7 +192,7 @@ def test_signal_leaves_finalized_file(feed_bin: Path, tmp_path: Path, sig: int,
     feed = Feed(feed_bin, *_feed_args(20000, axes=4))
     try:
         rp = _record_proc(feed.port, out)
-        _wait_cycles(out, feed, 1.5)
+        _wait_cycles(out, feed, rp, 600)
         rp.send_signal(sig)
         so, se = rp.communicate(timeout=30)
     finally:
@@ -203,7 +212,7 @@ def test_sigkill_leaves_readable_file(feed_bin: Path, tmp_path: Path, node_ready
     feed = Feed(feed_bin, *_feed_args(20000, axes=8))
     try:
         rp = _record_proc(feed.port, out, "--flush-interval", "0.5")
-        _wait_cycles(out, feed, 2.5)
+        _wait_cycles(out, feed, rp, 1000)
         rp.kill()
         rp.communicate(timeout=30)
     finally:
