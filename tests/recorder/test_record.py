@@ -53,6 +53,7 @@ def test_every_cycle_recorded(rec: dict[str, Any]) -> None:
     assert res.cycles == fres["sent"]
     assert (res.first_cycle, res.last_cycle) == (0, 1999)
     assert res.stopped_by == "eof" and res.connections == 1
+    assert res.bad_frames == 0  # every frame of the real server decodes
     assert [g["reason"] for g in res.gaps] == ["controller_restart"]
     cycles = [m["cycle"] for _t, _tt, m in mcapio.iter_json(rec["path"], [mcapio.T_CYCLE])]
     assert cycles == list(range(2000))
