@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import signal
 import sys
 import threading
@@ -27,6 +28,9 @@ def _cmd_record(args: argparse.Namespace) -> int:
     from servoamp.telemetry import read_token as tw_read_token
 
     stop = threading.Event()
+    # bad frames and the like: one line each on stderr, no traceback
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
+                        format="servoamp record: %(message)s")
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
         stop.set()
@@ -46,11 +50,18 @@ def _cmd_record(args: argparse.Namespace) -> int:
     try:
         res = record(host, port, args.output, args.duration, reconnect=not args.no_reconnect,
                      stop=stop, connect_timeout=args.connect_timeout,
-                     flush_interval=args.flush_interval, compression=args.compression,
-                     token=token)
+                     flush_interval=args.flush_interval, flush_messages=args.flush_messages,
+                     compression=args.compression, token=token)
     except ConnectionError as e:
         print(f"servoamp record: {e}", file=sys.stderr)
         return 3
+    except OSError as e:  # the output file
+        print(f"servoamp record: {args.output}: {e}", file=sys.stderr)
+        return 2
+    if res.bad_frames:
+        by = ", ".join(f"{k} {v}" for k, v in sorted(res.bad_frames_by_type.items()))
+        print(f"servoamp record: {res.bad_frames} bad frames skipped ({by}); "
+              f"counted in the file's servoamp.recording metadata", file=sys.stderr)
     if stop.is_set():
         res.stopped_by = "signal"
     d = res.as_dict()
@@ -80,8 +91,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
                    help="without --duration: give up when no first connection in S seconds")
     p.add_argument("--flush-interval", type=float, default=1.0, metavar="S",
-                   help="close a chunk at least every S seconds of controller time "
-                        "(bounds what SIGKILL loses)")
+                   help="close a chunk at least every S seconds of controller time and of "
+                        "host time (bounds what SIGKILL loses)")
+    p.add_argument("--flush-messages", type=int, default=10_000, metavar="N",
+                   help="close a chunk at least every N messages")
     p.add_argument("--compression", choices=["zstd", "lz4", "none"], default="zstd")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     tok = p.add_mutually_exclusive_group()

@@ -64,6 +64,10 @@ def summarize(path: Path | str) -> dict[str, Any]:
             logs_by_level[m["level"]] = logs_by_level.get(m["level"], 0) + 1
     wake.sort()
     irq.sort()
+    # the recorder's own account, written when it finished (absent after a SIGKILL)
+    rec_meta = next((m.metadata for m in mcapio.read_metadata(path)
+                     if m.name == "servoamp.recording"), None)
+    bad_frames = int(rec_meta.get("bad_frames", "0")) if rec_meta is not None else None
     lost_known = sum(g["lost"] or 0 for g in gaps)
     first = sessions[0] if sessions else {}
     return {
@@ -93,6 +97,9 @@ def summarize(path: Path | str) -> dict[str, Any]:
         "log_lines": logs,
         "log_lines_by_level": {str(k): v for k, v in sorted(logs_by_level.items())},
         "last_stats": last_stats,
+        "bad_frames": bad_frames,
+        "bad_frames_by_type": json.loads(rec_meta.get("bad_frames_by_type", "{}"))
+        if rec_meta is not None else None,
     }
 
 
@@ -120,6 +127,9 @@ def format_text(s: dict[str, Any]) -> str:
         lines.append(f"  {g['reason']} ({g['source']}): cycles {g['from_cycle']} .. "
                      f"{g['to_cycle']}, lost {g['lost']}")
     lines.append(f"log lines:   {s['log_lines']}")
+    if s["bad_frames"]:
+        lines.append(f"bad frames:  {s['bad_frames']} skipped by the recorder ("
+                     + ", ".join(f"{k} {v}" for k, v in s["bad_frames_by_type"].items()) + ")")
     return "\n".join(lines)
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import struct
+import time
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -167,13 +168,24 @@ def schema_for_topic(topic: str) -> str:
 class RecordingWriter:
     """An MCAP writer with the servoamp channels, chunked, compressed, indexed.
 
-    ``flush_interval_ns`` (controller time) closes the open chunk at least
-    that often, so a recorder killed with SIGKILL loses at most that much.
+    The open chunk is closed and handed to the OS (written, not fsynced) as
+    soon as any of these holds, so a recorder killed with SIGKILL loses at
+    most the messages of that one open chunk:
+
+    * ``flush_interval_ns`` of controller time (message timestamps) passed;
+    * ``flush_interval_s`` of host time (time.monotonic) passed since the last
+      flush while messages were pending: checked by maybe_flush() and poll(),
+      which the recorder calls at least every 0.1 s whatever arrives, so the
+      stretches with only PARAM/GAP/STATS/LOG messages are covered too;
+    * ``flush_messages`` messages were written since the last flush;
+    * the chunk reached ``chunk_size`` bytes (the mcap writer itself).
     """
 
     def __init__(self, out: IO[bytes], chunk_size: int = 1 << 20,
                  compression: CompressionType = CompressionType.ZSTD,
-                 flush_interval_ns: int = 1_000_000_000) -> None:
+                 flush_interval_ns: int = 1_000_000_000,
+                 flush_interval_s: float | None = None,
+                 flush_messages: int = 10_000) -> None:
         self.out = out
         self.writer = Writer(out, chunk_size=chunk_size, compression=compression,
                              index_types=IndexType.ALL, use_chunking=True,
@@ -184,7 +196,13 @@ class RecordingWriter:
         self._channels: dict[str, int] = {}
         self._seq: dict[int, int] = {}
         self.flush_interval_ns = flush_interval_ns
+        self.flush_interval_s = (flush_interval_s if flush_interval_s is not None
+                                 else flush_interval_ns / 1e9)
+        self.flush_messages = max(1, flush_messages)
         self._last_flush_ns: int | None = None
+        self._last_flush_host = time.monotonic()
+        self._flushed_messages = 0
+        self.flushes = 0
         self.messages = 0
         self.finished = False
 
@@ -215,12 +233,36 @@ class RecordingWriter:
     def metadata(self, name: str, data: dict[str, str]) -> None:
         self.writer.add_metadata(name, data)
 
-    def maybe_flush(self, t_ns: int) -> None:
-        if self._last_flush_ns is None:
-            self._last_flush_ns = t_ns
-        elif abs(t_ns - self._last_flush_ns) >= self.flush_interval_ns:
-            self.writer.flush()  # type: ignore[no-untyped-call]
-            self._last_flush_ns = t_ns
+    def flush(self) -> None:
+        """Close the open chunk (if it holds messages) and hand everything to the OS."""
+        self.writer.flush()  # type: ignore[no-untyped-call]
+        self.out.flush()
+        self._flushed_messages = self.messages
+        self._last_flush_host = time.monotonic()
+        self.flushes += 1
+
+    def maybe_flush(self, t_ns: int | None = None) -> None:
+        """After writing: flush when one of the limits (class docstring) is reached.
+        t_ns is the controller time of the newest message, None if unknown."""
+        pending = self.messages - self._flushed_messages
+        if t_ns is not None:
+            if self._last_flush_ns is None:
+                self._last_flush_ns = t_ns
+            elif abs(t_ns - self._last_flush_ns) >= self.flush_interval_ns:
+                self._last_flush_ns = t_ns
+                if pending:
+                    self.flush()
+                    return
+        if pending >= self.flush_messages:
+            self.flush()
+        else:
+            self.poll()
+
+    def poll(self) -> None:
+        """Flush when messages have been pending for flush_interval_s of host time."""
+        if self.messages != self._flushed_messages and \
+                time.monotonic() - self._last_flush_host >= self.flush_interval_s:
+            self.flush()
 
     def finish(self) -> None:
         if not self.finished:

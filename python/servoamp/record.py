@@ -12,6 +12,7 @@ killed recorder leaves behind.
 from __future__ import annotations
 
 import json
+import logging
 import socket
 import threading
 import time
@@ -33,6 +34,9 @@ _AXIS_T = (b'{"cycle":%d,"axis":%d,"command":{"control_word":%d,"target_pos":%d,
 _PATH_T = b'{"cycle":%d,"command":{"x":%d,"y":%d},"actual":{"x":%d,"y":%d}}'
 _EXN = [n.encode() for n in tw.EXCHANGE_NAMES]
 
+log = logging.getLogger("servoamp.record")
+BAD_FRAMES_SHOWN = 20  # bad frames reported one by one; the rest are only counted
+
 
 @dataclass
 class RecordResult:
@@ -48,6 +52,9 @@ class RecordResult:
     cpu_s: float = 0.0
     last_stats: dict[str, Any] | None = None
     controller_id: str = ""
+    bad_frames: int = 0
+    bad_frames_by_type: dict[str, int] = field(default_factory=dict)
+    flushes: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
@@ -72,6 +79,22 @@ class _Session:
         self.pending_reconnect: tuple[int | None, int | None, bool] | None = None
         self.final_seen = False
         self.meta_written = False
+        self.hello_this_conn = False
+
+    def new_connection(self) -> None:
+        self.hello_this_conn = False
+
+    def bad_frame(self, typ: int, ln: int, why: str) -> None:
+        """A frame that does not decode: counted, reported, skipped."""
+        res = self.res
+        name = tw.msg_name(typ)
+        res.bad_frames += 1
+        res.bad_frames_by_type[name] = res.bad_frames_by_type.get(name, 0) + 1
+        if res.bad_frames <= BAD_FRAMES_SHOWN:
+            log.warning("bad %s frame (%d bytes) after cycle %s skipped: %s", name, ln,
+                        self.last_cycle, why)
+            if res.bad_frames == BAD_FRAMES_SHOWN:
+                log.warning("further bad frames are counted, not shown")
 
     # -- messages -----------------------------------------------------------------
     def on_hello(self, h: tw.Hello) -> None:
@@ -82,6 +105,7 @@ class _Session:
                                       prev.session_id != h.session_id)
             self.expect = None  # the first cycle of this connection writes the marker
         self.hello = h
+        self.hello_this_conn = True
         self.res.controller_id = h.controller_id
         self.final_seen = False
         if h.n_axes != self.n_axes:
@@ -155,6 +179,9 @@ class _Session:
             self.final_seen = True
 
     def process(self, buf: bytearray, frames: Any) -> None:
+        """Decode and write the frames; a frame that does not decode is counted
+        and skipped (bad_frame). tw.ProtocolError from the frames iterator (the
+        framing itself is lost) goes to the caller, after the bookkeeping."""
         w = self.w
         add = w.writer.add_message
         cstruct = self.cstruct
@@ -168,77 +195,88 @@ class _Session:
         cycles = 0
         nmsg = 0
         t_ns = self.last_t_ns
-        for typ, off, ln in frames:
-            if typ == tw.MSG_CYCLE:
-                if ln < csize:
-                    raise tw.ProtocolError(f"CYCLE of {ln} bytes, expected {csize}")
-                v = unpack(buf, off)
-                cyc = v[0]
-                t_ns = v[1]
-                if cyc != self.expect:
-                    self.on_cycle_batch_start(cyc, t_ns)
-                self.expect = cyc + 1
-                seq = cyc & 0xFFFFFFFF
-                add(cid_cycle, t_ns, _CYCLE_T % (cyc, v[2], v[3], v[4], v[4] * tick_ns, v[5],
-                                                 _EXN[v[6]] if v[6] < 6 else b"none", v[6],
-                                                 v[7], v[8], v[9]), t_ns, seq)
-                a = 11
-                for i in range(n):
-                    add(cid_axes[i], t_ns, _AXIS_T % ((cyc, i) + v[a:a + 9]), t_ns, seq)
-                    a += 9
-                if cid_path is not None:
-                    add(cid_path, t_ns, _PATH_T % (cyc, v[12], v[21], v[16], v[25]), t_ns, seq)
-                    nmsg += 1
-                nmsg += 1 + n
-                cycles += 1
-                if self.res.first_cycle is None:
-                    self.res.first_cycle = cyc
-                self.last_cycle = cyc
-            elif typ == tw.MSG_HELLO:
-                self.on_hello(tw.decode_hello(bytes(buf[off:off + ln])))
-                # the axis count may have changed: rebind the locals
-                cstruct = self.cstruct
-                unpack = cstruct.unpack_from
-                csize = cstruct.size
-                cid_axes = self.cid_axes
-                cid_path = self.cid_path
-                n = self.n_axes
-                tick_ns = self.tick_ns
-            elif typ == tw.MSG_STATS:
-                self.on_stats(tw.decode_stats(bytes(buf[off:off + ln])))
-            elif typ == tw.MSG_PARAM:
-                p = tw.decode_param(bytes(buf[off:off + ln]))
-                w.write(mcapio.T_PARAM, p.t_ns, {"cycle": p.cycle, "id": p.id, "name": p.name,
-                                                 "type": p.type, "value": p.value,
-                                                 "unit": p.unit})
-            elif typ == tw.MSG_LOG:
-                lg = tw.decode_log(bytes(buf[off:off + ln]))
-                w.write(mcapio.T_LOG, lg.t_ns, {
-                    "timestamp": {"sec": lg.t_ns // 1_000_000_000,
-                                  "nsec": lg.t_ns % 1_000_000_000},
-                    "level": lg.level if 0 <= lg.level <= 5 else 0,
-                    "message": lg.text, "name": lg.source, "file": "", "line": 0})
-            elif typ == tw.MSG_GAP:
-                self.on_gap(tw.decode_gap(bytes(buf[off:off + ln])))
-            elif typ == tw.MSG_QUEUES:
-                q = tw.decode_queues(bytes(buf[off:off + ln]))
-                w.write(mcapio.T_QUEUES, q.t_ns, {
-                    "levels": {k: lv for k, (lv, _c) in q.levels.items()},
-                    "capacity": {k: c for k, (_lv, c) in q.levels.items()}})
-            # unknown types are skipped (forward compatible)
-        self.last_t_ns = t_ns
-        self.res.cycles += cycles
-        w.messages += nmsg
-        if self.last_cycle is not None:
-            self.res.last_cycle = self.last_cycle
-        w.maybe_flush(t_ns)
+        try:
+            for typ, off, ln in frames:
+                if typ == tw.MSG_CYCLE:
+                    if not self.hello_this_conn:
+                        self.bad_frame(typ, ln, "CYCLE before a valid HELLO on this connection")
+                        continue
+                    if ln < csize:
+                        self.bad_frame(typ, ln, f"CYCLE of {ln} bytes, expected {csize} "
+                                                f"for {n} axes")
+                        continue
+                    v = unpack(buf, off)
+                    cyc = v[0]
+                    t_ns = v[1]
+                    if cyc != self.expect:
+                        self.on_cycle_batch_start(cyc, t_ns)
+                    self.expect = cyc + 1
+                    seq = cyc & 0xFFFFFFFF
+                    add(cid_cycle, t_ns, _CYCLE_T % (cyc, v[2], v[3], v[4], v[4] * tick_ns, v[5],
+                                                     _EXN[v[6]] if v[6] < 6 else b"none", v[6],
+                                                     v[7], v[8], v[9]), t_ns, seq)
+                    a = 11
+                    for i in range(n):
+                        add(cid_axes[i], t_ns, _AXIS_T % ((cyc, i) + v[a:a + 9]), t_ns, seq)
+                        a += 9
+                    if cid_path is not None:
+                        add(cid_path, t_ns, _PATH_T % (cyc, v[12], v[21], v[16], v[25]), t_ns,
+                            seq)
+                        nmsg += 1
+                    nmsg += 1 + n
+                    cycles += 1
+                    if self.res.first_cycle is None:
+                        self.res.first_cycle = cyc
+                    self.last_cycle = cyc
+                    continue
+                try:
+                    m = tw.decode(typ, bytes(buf[off:off + ln]))
+                except tw.ProtocolError as e:
+                    self.bad_frame(typ, ln, str(e))
+                    continue
+                if isinstance(m, tw.Hello):
+                    self.on_hello(m)
+                    # the axis count may have changed: rebind the locals
+                    cstruct = self.cstruct
+                    unpack = cstruct.unpack_from
+                    csize = cstruct.size
+                    cid_axes = self.cid_axes
+                    cid_path = self.cid_path
+                    n = self.n_axes
+                    tick_ns = self.tick_ns
+                elif isinstance(m, tw.Stats):
+                    self.on_stats(m)
+                elif isinstance(m, tw.Param):
+                    w.write(mcapio.T_PARAM, m.t_ns, {"cycle": m.cycle, "id": m.id,
+                                                     "name": m.name, "type": m.type,
+                                                     "value": m.value, "unit": m.unit})
+                elif isinstance(m, tw.Log):
+                    w.write(mcapio.T_LOG, m.t_ns, {
+                        "timestamp": {"sec": m.t_ns // 1_000_000_000,
+                                      "nsec": m.t_ns % 1_000_000_000},
+                        "level": m.level if 0 <= m.level <= 5 else 0,
+                        "message": m.text, "name": m.source, "file": "", "line": 0})
+                elif isinstance(m, tw.Gap):
+                    self.on_gap(m)
+                elif isinstance(m, tw.Queues):
+                    w.write(mcapio.T_QUEUES, m.t_ns, {
+                        "levels": {k: lv for k, (lv, _c) in m.levels.items()},
+                        "capacity": {k: c for k, (_lv, c) in m.levels.items()}})
+                # unknown types (None) are skipped: forward compatible
+        finally:
+            self.last_t_ns = t_ns
+            self.res.cycles += cycles
+            w.messages += nmsg
+            if self.last_cycle is not None:
+                self.res.last_cycle = self.last_cycle
+            w.maybe_flush(t_ns if cycles else None)
 
 
 def record(host: str, port: int, out: str | Path, duration: float | None = None, *,
            reconnect: bool = True, stop: threading.Event | None = None,
            connect_timeout: float = 10.0, max_backoff: float = 2.0,
-           flush_interval: float = 1.0, chunk_size: int = 1 << 20,
-           compression: str = "zstd",
+           flush_interval: float = 1.0, flush_messages: int = 10_000,
+           chunk_size: int = 1 << 20, compression: str = "zstd",
            on_progress: Callable[[RecordResult], None] | None = None,
            token: bytes | str | None = None) -> RecordResult:
     """Record from host:port into out until duration (s, wall clock) elapses,
@@ -249,6 +287,17 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
     /servoamp/gap. Without a first connection within connect_timeout (when
     no duration is given) ConnectionError is raised. The file is finalized
     (summary, indexes) in every case but SIGKILL.
+
+    A frame that does not decode (short, or a field out of range) is counted
+    in res.bad_frames, reported once on the "servoamp.record" logger (the
+    first BAD_FRAMES_SHOWN), and skipped. A frame header announcing more than
+    FrameSplitter.MAX_FRAME bytes loses the framing: it is counted too, and the
+    connection is dropped and re-established (reconnect=True) or the
+    recording ends with stopped_by "protocol_error".
+
+    The open chunk is written out every flush_interval seconds (controller
+    time, and host time whatever arrives) and every flush_messages messages:
+    that bounds what a SIGKILL loses (mcapio.RecordingWriter).
 
     Every connection starts with an AUTH frame carrying token (servod's
     --telemetry-token; None: an empty token, for a server without one).
@@ -263,7 +312,8 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
     deadline = t0 + duration if duration is not None else None
     f = open(out, "wb")
     w = mcapio.RecordingWriter(f, chunk_size=chunk_size, compression=comp,
-                               flush_interval_ns=int(flush_interval * 1e9))
+                               flush_interval_ns=int(flush_interval * 1e9),
+                               flush_interval_s=flush_interval, flush_messages=flush_messages)
     sess = _Session(w, res)
     backoff = 0.05
     ever_connected = False
@@ -282,6 +332,7 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
                     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
                     sock.sendall(auth)
                     splitter = tw.FrameSplitter()
+                    sess.new_connection()
                     ever_connected = True
                     backoff = 0.05
                 except OSError:
@@ -292,6 +343,7 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
                     if ever_connected and not reconnect:
                         res.stopped_by = "eof"
                         break
+                    w.poll()
                     wait = backoff
                     if deadline is not None:
                         wait = min(wait, max(0.0, deadline - now))
@@ -301,18 +353,33 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
             try:
                 data = sock.recv(1 << 18)
             except socket.timeout:
+                w.poll()
                 continue
             except OSError:
                 data = b""
             if not data:
                 sock.close()
                 sock = None
+                w.flush()  # the backoff may wait longer than the flush interval
                 if not reconnect:
                     res.stopped_by = "eof"
                     break
                 continue
             splitter.feed(data)
-            sess.process(splitter.buf, splitter.frames())
+            try:
+                sess.process(splitter.buf, splitter.frames())
+            except tw.ProtocolError as e:
+                hdr = bytes(splitter.buf[:tw.FRAME.size])
+                typ, _fl, ln = tw.FRAME.unpack(hdr) if len(hdr) == tw.FRAME.size else (0, 0, 0)
+                sess.bad_frame(typ, ln, f"{e}: framing lost, "
+                               + ("reconnecting" if reconnect else "recording ends"))
+                sock.close()
+                sock = None
+                w.flush()
+                if not reconnect:
+                    res.stopped_by = "protocol_error"
+                    break
+                continue
             if on_progress is not None:
                 on_progress(res)
         else:
@@ -327,9 +394,12 @@ def record(host: str, port: int, out: str | Path, duration: float | None = None,
         w.metadata("servoamp.recording", {
             "cycles": str(res.cycles), "connections": str(res.connections),
             "gaps": str(len(res.gaps)), "stopped_by": res.stopped_by or "error",
+            "bad_frames": str(res.bad_frames),
+            "bad_frames_by_type": json.dumps(res.bad_frames_by_type),
             "last_stats": json.dumps(res.last_stats)})
         w.finish()
         f.close()
+        res.flushes = w.flushes
         res.messages = w.messages
         res.wall_s = time.monotonic() - t0
         res.cpu_s = time.process_time() - c0

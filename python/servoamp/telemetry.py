@@ -7,9 +7,10 @@ by ``length`` payload bytes, little-endian; the first frame is HELLO.
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass, field
-from typing import Iterator
+from typing import Callable, Iterator
 
 WIRE_VERSION = 1
 MAGIC = 0x4D4C5453  # "STLM"
@@ -144,12 +145,27 @@ class Queues:
 
 
 class ProtocolError(Exception):
-    """The stream does not follow the wire format."""
+    """The stream does not follow the wire format.
+
+    The one exception the decoders below and FrameSplitter raise for bad
+    input, whatever the bytes (tests/fuzz/test_telemetry_decoder.py checks
+    it): a payload shorter than its type needs, a count or length field that
+    points past the payload, or a value outside the field's range.
+    """
+
+
+LOG_TEXT_MAX = 480
+QUEUES_MAX = 8
+COUNTERS_MAX = 64
+
+
+def _need(p: bytes | memoryview, n: int, what: str) -> None:
+    if len(p) < n:
+        raise ProtocolError(f"{what} of {len(p)} bytes, expected at least {n}")
 
 
 def decode_hello(p: bytes | memoryview) -> Hello:
-    if len(p) < HELLO.size:
-        raise ProtocolError("short HELLO")
+    _need(p, HELLO.size, "HELLO")
     magic, ver, _r, sid, t_ns, rt, n, period, hz, ring, cid = HELLO.unpack_from(p)
     if magic != MAGIC:
         raise ProtocolError(f"bad magic {magic:#x}")
@@ -160,11 +176,24 @@ def decode_hello(p: bytes | memoryview) -> Hello:
     return Hello(ver, sid, t_ns, rt, n, period, hz, ring, _cstr(cid))
 
 
+def decode_cycle(p: bytes | memoryview, n_axes: int) -> tuple[int | float, ...]:
+    """The CYCLE payload as the flat tuple of cycle_struct(n_axes) (the
+    recorder unpacks it inline with the same length check)."""
+    if not 0 <= n_axes <= 64:
+        raise ProtocolError(f"axis count {n_axes}")
+    st = cycle_struct(n_axes)
+    _need(p, st.size, f"CYCLE ({n_axes} axes)")
+    return st.unpack_from(p)
+
+
 def decode_stats(p: bytes | memoryview) -> Stats:
+    _need(p, STATS_HDR.size, "STATS")
     f = STATS_HDR.unpack_from(p)
     n = f[14]
+    if n > COUNTERS_MAX or len(p) < STATS_HDR.size + n * COUNTER.size:
+        raise ProtocolError(f"STATS with {n} counters in {len(p)} bytes")
     counters = {}
-    for k in range(min(n, (len(p) - STATS_HDR.size) // COUNTER.size)):
+    for k in range(n):
         name, val = COUNTER.unpack_from(p, STATS_HDR.size + k * COUNTER.size)
         counters[_cstr(name)] = val
     return Stats(f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9], f[10], f[11],
@@ -172,29 +201,68 @@ def decode_stats(p: bytes | memoryview) -> Stats:
 
 
 def decode_param(p: bytes | memoryview) -> Param:
+    _need(p, PARAM.size, "PARAM")
     t_ns, cyc, pid, typ, val, name, unit = PARAM.unpack_from(p)
-    tname = PARAM_TYPES[typ] if typ < len(PARAM_TYPES) else str(typ)
-    return Param(t_ns, cyc, pid, tname, val, _cstr(name), _cstr(unit))
+    if typ >= len(PARAM_TYPES):
+        raise ProtocolError(f"PARAM type {typ}")
+    if not math.isfinite(val):
+        raise ProtocolError(f"PARAM value {val} is not a finite number")
+    return Param(t_ns, cyc, pid, PARAM_TYPES[typ], val, _cstr(name), _cstr(unit))
 
 
 def decode_log(p: bytes | memoryview) -> Log:
+    _need(p, LOG_HDR.size, "LOG")
     t_ns, cyc, level, n, src = LOG_HDR.unpack_from(p)
+    if n > LOG_TEXT_MAX or len(p) < LOG_HDR.size + n:
+        raise ProtocolError(f"LOG with {n} text bytes in {len(p)} bytes")
     text = bytes(p[LOG_HDR.size:LOG_HDR.size + n]).decode("utf-8", "replace")
     return Log(t_ns, cyc, level, _cstr(src), text)
 
 
 def decode_gap(p: bytes | memoryview) -> Gap:
+    _need(p, GAP.size, "GAP")
     t_ns, frm, to, count, reason, _r = GAP.unpack_from(p)
-    return Gap(t_ns, frm, to, count, GAP_REASONS.get(reason, f"reason_{reason}"))
+    if reason not in GAP_REASONS:
+        raise ProtocolError(f"GAP reason {reason}")
+    return Gap(t_ns, frm, to, count, GAP_REASONS[reason])
 
 
 def decode_queues(p: bytes | memoryview) -> Queues:
+    _need(p, QUEUES_HDR.size, "QUEUES")
     t_ns, n, _r = QUEUES_HDR.unpack_from(p)
+    if n > QUEUES_MAX or len(p) < QUEUES_HDR.size + n * QUEUE.size:
+        raise ProtocolError(f"QUEUES with {n} queues in {len(p)} bytes")
     levels = {}
-    for k in range(min(n, (len(p) - QUEUES_HDR.size) // QUEUE.size)):
+    for k in range(n):
         name, level, cap = QUEUE.unpack_from(p, QUEUES_HDR.size + k * QUEUE.size)
         levels[_cstr(name)] = (level, cap)
     return Queues(t_ns, levels)
+
+
+MSG_NAMES = {MSG_HELLO: "HELLO", MSG_CYCLE: "CYCLE", MSG_STATS: "STATS", MSG_PARAM: "PARAM",
+             MSG_LOG: "LOG", MSG_GAP: "GAP", MSG_QUEUES: "QUEUES", MSG_AUTH: "AUTH"}
+
+Decoded = Hello | Stats | Param | Log | Gap | Queues | tuple[int | float, ...] | None
+
+
+def msg_name(typ: int) -> str:
+    return MSG_NAMES.get(typ, f"type_{typ}")
+
+
+def decode(typ: int, p: bytes | memoryview, n_axes: int = 0) -> Decoded:
+    """Any server-to-client frame's payload: the decoded message, or None for a
+    type this reader does not know (skipped: forward compatible). CYCLE needs
+    the axis count of the connection's HELLO. Raises only ProtocolError."""
+    if typ == MSG_CYCLE:
+        return decode_cycle(p, n_axes)
+    dec = _DECODERS.get(typ)
+    return dec(p) if dec is not None else None
+
+
+_DECODERS: dict[int, Callable[[bytes | memoryview], Decoded]] = {
+    MSG_HELLO: decode_hello, MSG_STATS: decode_stats, MSG_PARAM: decode_param,
+    MSG_LOG: decode_log, MSG_GAP: decode_gap, MSG_QUEUES: decode_queues,
+}
 
 
 class FrameSplitter:
@@ -230,3 +298,58 @@ class FrameSplitter:
         finally:
             if off:
                 del buf[:off]
+
+
+# ---- encoding: the server's side, for stand-in servers, tests and fuzzing ----------
+# (the producer is linux/telemetry/telem.c; these follow docs/telemetry.md)
+
+def encode_frame(typ: int, payload: bytes, flags: int = 0) -> bytes:
+    return FRAME.pack(typ, flags, len(payload)) + payload
+
+
+def encode_hello(n_axes: int, session_id: int = 1, t_ns: int = 0, realtime_ns: int = 0,
+                 cycle_period_ns: int = 1_000_000, clock_hz: int = 100_000_000,
+                 ring_capacity: int = 4096, controller_id: str = "test") -> bytes:
+    return encode_frame(MSG_HELLO, HELLO.pack(MAGIC, WIRE_VERSION, 0, session_id, t_ns,
+                                              realtime_ns, n_axes, cycle_period_ns, clock_hz,
+                                              ring_capacity, controller_id.encode()))
+
+
+def encode_cycle(n_axes: int, cycle: int, t_ns: int, exchange: int = 0,
+                 axes: list[tuple[int, ...]] | None = None) -> bytes:
+    """axes: per axis the 9 words (command 4, feedback 5); default zeros."""
+    words: list[int] = []
+    for i in range(n_axes):
+        words += list(axes[i]) if axes is not None else [0] * AXIS_WORDS
+    return encode_frame(MSG_CYCLE, cycle_struct(n_axes).pack(
+        cycle, t_ns, cycle & 0xFFFFFFFF, 0, 0, 0, exchange, 0, 0, 0, n_axes, *words))
+
+
+def encode_stats(t_ns: int, last_cycle: int = 0, final: bool = False,
+                 counters: dict[str, int] | None = None) -> bytes:
+    c = counters or {}
+    p = STATS_HDR.pack(t_ns, last_cycle, last_cycle, 0, last_cycle, 0, 0, 0, 0, 0, 0, 4096, 1,
+                       STATS_FINAL if final else 0, len(c), 0)
+    p += b"".join(COUNTER.pack(k.encode(), v) for k, v in c.items())
+    return encode_frame(MSG_STATS, p)
+
+
+def encode_param(t_ns: int, cycle: int, pid: int, value: float, name: str, unit: str = "",
+                 typ: int = 3) -> bytes:
+    return encode_frame(MSG_PARAM, PARAM.pack(t_ns, cycle, pid, typ, value, name.encode(),
+                                              unit.encode()))
+
+
+def encode_log(t_ns: int, cycle: int, text: str, level: int = 2, source: str = "test") -> bytes:
+    b = text.encode()
+    return encode_frame(MSG_LOG, LOG_HDR.pack(t_ns, cycle, level, len(b), source.encode()) + b)
+
+
+def encode_gap(t_ns: int, frm: int, to: int, count: int, reason: int) -> bytes:
+    return encode_frame(MSG_GAP, GAP.pack(t_ns, frm, to, count, reason, 0))
+
+
+def encode_queues(t_ns: int, levels: dict[str, tuple[int, int]]) -> bytes:
+    p = QUEUES_HDR.pack(t_ns, len(levels), 0)
+    p += b"".join(QUEUE.pack(k.encode(), lv, cap) for k, (lv, cap) in levels.items())
+    return encode_frame(MSG_QUEUES, p)

@@ -168,6 +168,7 @@ def test_every_cycle_on_record(run: dict[str, Any]) -> None:
           f"servod: telem.dropped {b['telem.dropped']}, client_lost {b['telem.client_lost']}, "
           f"missed_irq {int(b['linux.missed_irq']) - int(a['linux.missed_irq'])}")
     assert res.stopped_by == "stop" and res.connections == 1
+    assert res.bad_frames == 0, res.bad_frames_by_type  # servod's frames all decode
     if qemu.default_clock() == "virtual":
         # host load cannot cost the guest a cycle: Linux misses none, except
         # while remoteproc reloads the hung firmware (the kernel's recovery
