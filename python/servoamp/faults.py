@@ -109,17 +109,19 @@ class Campaign:
     def attached(self) -> bool:
         return "link=attached" in self.sh("ampctl status 2>&1")
 
-    def wait_attached_and_running(self, guest_s: float = 10.0) -> tuple[bool, dict[str, str]]:
-        """The link attached and exchanges advancing, within guest_s of
-        guest time (the shell's sleeps run on the guest clock)."""
+    def wait_attached_and_running(self, guest_s: float = 10.0,
+                                  state: str = "RUNNING") -> tuple[bool, dict[str, str]]:
+        """The link attached, the servo in `state` and exchanges advancing,
+        within guest_s of guest time (the shell's sleeps run on the guest
+        clock)."""
         n = int(guest_s / 0.25)
         for _ in range(n):
             a = self.stats()
-            if a.get("servo.state") == "RUNNING" and self.attached():
+            if a.get("servo.state") == state and self.attached():
                 self.sh("sleep 0.25")
                 b = self.stats()
                 if int(b.get("linux.exchanges", 0)) > int(a.get("linux.exchanges", 0)) and \
-                        b.get("servo.state") == "RUNNING":
+                        b.get("servo.state") == state:
                     return True, b
             self.sh("sleep 0.25")
         return False, self.stats()
@@ -279,6 +281,9 @@ class Fault:
     what: str
     run: Callable[[Campaign, Outcome, dict[str, str]], None]
     must_restart: bool      # the right answer is remoteproc's recovery
+    # the right answer is a safe stop that holds the axes until the
+    # operator's `ampctl resume` (SP_CMD_RESUME), the exchange running
+    held: bool = False
 
 
 FAULTS: list[Fault] = [
@@ -290,7 +295,8 @@ FAULTS: list[Fault] = [
     Fault("mbox-sem", "mailbox semaphore word garbled", f_mbox_sem, False),
     Fault("servo-irq-3ms", "servo's cycle interrupt disabled at the GIC for 3 ms", f_servo_irq_short, False),
     Fault("servo-irq-off", "servo's cycle interrupt disabled at the GIC for good", f_servo_irq_long, True),
-    Fault("linux-irq-50ms", "Linux's cycle interrupt disabled at the GIC for 50 ms", f_linux_irq, False),
+    Fault("linux-irq-50ms", "Linux's cycle interrupt disabled at the GIC for 50 ms", f_linux_irq, False,
+          held=True),
     Fault("hang", "firmware stops its cycle work and heartbeat (ampctl debug hang)", f_hang, True),
 ]
 
@@ -302,11 +308,18 @@ def run_one(c: Campaign, f: Fault) -> Outcome:
         o.notes.append("not running before the fault")
         return o
     f.run(c, o, before)
+    held = ""
+    if f.held:
+        ok, _ = c.wait_attached_and_running(state="SAFESTOP")
+        held = "exchange back at once, axes held in safe stop until `ampctl resume`" if ok \
+            else "exchange NOT back"
+        if ok:
+            c.sh("ampctl resume 2>&1")
     ok, after = c.wait_attached_and_running()
-    o.recovered = ok
+    o.recovered = ok and (not f.held or not held.endswith("NOT back"))
     rec_n = _delta(before, after, "linux.recoveries")
-    o.recovery = (f"remoteproc recovery ({rec_n}), parameters restored" if rec_n else "no restart needed") \
-        if ok else "NOT recovered"
+    o.recovery = held or ((f"remoteproc recovery ({rec_n}), parameters restored" if rec_n else
+                           "no restart needed") if ok else "NOT recovered")
     o.crashes = c.alive()
     detected = bool(o.detected_by) and not o.detected_by.endswith("not detected") and \
         "nothing counted" not in o.detected_by
