@@ -69,8 +69,13 @@ int amp_linux_peer(const struct amp_linux *l)
 	AMP_PORT_CACHE_INVAL(sl, sizeof(*sl));
 	epoch = RD_ACQ(&sl->epoch);
 	state = RD(&sl->state);
+	/* Another epoch word: before the servo's first attach in this
+	 * epoch, the servo of an earlier one (absent). After it, the servo
+	 * only ever rewrites the same epoch, so another value is a stray
+	 * write: a peer error, which the caller recovers, not an absence it
+	 * would wait on forever. */
 	if (epoch != l->epoch)
-		return AMP_E_PEER_ABSENT;
+		return l->peer_seen ? AMP_E_PEER_ERROR : AMP_E_PEER_ABSENT;
 	if (state == AMP_SSTATE_RUNNING || state == AMP_SSTATE_SAFESTOP)
 		return AMP_OK;
 	if (state == AMP_SSTATE_OFFLINE)
@@ -130,7 +135,7 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	struct amp_rx_info tmp;
 	struct amp_cmd_record c = { 0 };
 	struct amp_ocm *o;
-	uint32_t seq;
+	uint32_t seq, sem;
 	int peer;
 
 	if (!l || !l->ocm || n_axes > AMP_MAX_AXES || (n_axes && !axes))
@@ -170,7 +175,13 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	 * semaphore busy and hands it back, so "busy" never outlives the
 	 * exchange it stands for */
 	AMP_PORT_CACHE_INVAL(&o->cyc_sem, 4u);
-	if (RD_ACQ(&o->cyc_sem.sem) == AMP_SEM_IDLE) {
+	sem = RD_ACQ(&o->cyc_sem.sem);
+	if (sem != AMP_SEM_BUSY) {
+		/* a word that is neither IDLE nor BUSY is a stray write: the
+		 * token is handed to the servo as if it were idle (the
+		 * sequence, not the semaphore, says which commands are new) */
+		if (sem != AMP_SEM_IDLE)
+			l->st.sem_corrupt++;
 		WR_REL(&o->cyc_sem.sem, AMP_SEM_BUSY);
 		AMP_PORT_CACHE_CLEAN(&o->cyc_sem, 4u);
 	}
@@ -205,6 +216,7 @@ int amp_linux_mbox_post(struct amp_linux *l, const struct amp_msg *req)
 {
 	struct amp_frame_hdr h = { 0 };
 	struct amp_ocm *o;
+	uint32_t sem;
 	int rc;
 
 	if (!l || !l->ocm || !req || (req->length && !req->data))
@@ -215,10 +227,16 @@ int amp_linux_mbox_post(struct amp_linux *l, const struct amp_msg *req)
 	rc = amp_linux_peer(l);
 	if (rc != AMP_OK)
 		return rc;
-	/* 2. read the semaphore: the token must be ours */
+	/* 2. read the semaphore: the token must be ours. A word that is
+	 * neither IDLE nor BUSY is a stray write that neither side would
+	 * ever hand back: the requester takes the token (counted), and an
+	 * answer still under way is told apart by its sequence. */
 	AMP_PORT_CACHE_INVAL(&o->mbox_sem, 4u);
-	if (RD_ACQ(&o->mbox_sem.sem) != AMP_SEM_IDLE)
+	sem = RD_ACQ(&o->mbox_sem.sem);
+	if (sem == AMP_SEM_BUSY)
 		return AMP_E_BUSY;
+	if (sem != AMP_SEM_IDLE)
+		l->st.sem_corrupt++;
 	/* 1, 3. encode the frame and write it */
 	h.epoch = l->epoch;
 	h.seq = ++l->mbox_seq;

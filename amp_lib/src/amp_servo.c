@@ -12,7 +12,6 @@ int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size)
 	struct amp_ocm *o = base;
 	struct amp_servo_line *sl;
 	struct amp_ocm_header h;
-	uint32_t same;
 
 	if (!s || !o || ((uintptr_t)base % AMP_CACHE_LINE) != 0 || size < sizeof(*o))
 		return AMP_E_INVAL;
@@ -34,13 +33,18 @@ int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size)
 	s->epoch = h.epoch;
 	s->wd.limit = h.wd_limit;
 	AMP_PORT_CACHE_INVAL(sl, sizeof(*sl));
-	/* Re-attaching in the same epoch (the servo restarted while Linux
-	 * kept the region): continue the sequences, count the restart. */
-	same = RD(&sl->epoch) == h.epoch;
-	s->fb_seq = same ? RD(&sl->fb_pub) : 0;
+	/* Linux zeroes this line with every new epoch, so continuing its
+	 * sequences and counting the attach is right for a first attach (all
+	 * 0) and for a re-attach in the same epoch (the servo restarted while
+	 * Linux kept the region). Nothing is decided on the line's epoch
+	 * word: a stray write to it must not make a restart look like a
+	 * first attach (attach_count back to 1, which Linux takes for the
+	 * attach it already recovered, feedback sequence back to 0, which
+	 * Linux takes for reordered records). */
+	s->fb_seq = RD(&sl->fb_pub);
 	s->heartbeat = RD(&sl->heartbeat);
 	s->cmd_seq = RD_ACQ(&o->linux_line.cmd_pub);
-	WR(&sl->attach_count, same ? RD(&sl->attach_count) + 1u : 1u);
+	WR(&sl->attach_count, RD(&sl->attach_count) + 1u);
 	WR(&sl->fault, 0);
 	WR(&sl->cmd_stale, 0);
 	WR(&sl->cmd_missed, 0);

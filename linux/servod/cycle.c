@@ -56,7 +56,8 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 	/* a servo whose state word says FAULT (or garbage) for wd_limit
 	 * cycles: recovered like a stall */
 	if (cycle_stats_peer_error(st, rc, sd->amp.wd.limit, pi.attach_count, w->t_ns))
-		atomic_store(&sd->session.stall_pending, STALL_PEER_ERROR); else if (rc == AMP_OK || rc == AMP_E_PEER_ERROR) {
+		atomic_store(&sd->session.stall_pending, STALL_PEER_ERROR);
+	else if (rc == AMP_OK || rc == AMP_E_PEER_ERROR) {
 		if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED)
 			st->exchanges++;
 		st->servo_cycle = sd->amp.fb.cycle;

@@ -88,8 +88,8 @@ static void put_linux(struct out *o, const struct cycle_stats *c, const struct a
 	put(o, "linux.restores=%llu\n", (unsigned long long)c->restores);
 	put(o, "linux.fb_fresh=%u\nlinux.fb_stale=%u\nlinux.fb_torn=%u\nlinux.fb_missed=%u\nlinux.fb_invalid=%u\n",
 	    as->fresh, as->stale, as->torn, as->missed, as->invalid);
-	put(o, "linux.peer_late=%u\nlinux.mbox_ok=%u\nlinux.mbox_err=%u\n", as->peer_late, as->mbox_ok,
-	    as->mbox_err);
+	put(o, "linux.peer_late=%u\nlinux.mbox_ok=%u\nlinux.mbox_err=%u\nlinux.sem_corrupt=%u\n", as->peer_late,
+	    as->mbox_ok, as->mbox_err, as->sem_corrupt);
 	put(o, "linux.amp_cycle=%u\nlinux.fb_servo_cycle=%u\nlinux.fb_cmd_seq=%u\n", lcycle, c->servo_cycle,
 	    c->servo_cmd_seq);
 	put(o, "linux.wake_lat_ns.min=%u\nlinux.wake_lat_ns.mean=%llu\nlinux.wake_lat_ns.max=%u\n", c->lat_min,

@@ -60,8 +60,12 @@ static void report_stall(struct servod *sd, int why)
 
 	if (why == STALL_PEER_ERROR) {
 		(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
-		logw(sd, "servo faulted (state word 0x%08x, fault 0x%08x) for %u cycles: reporting a crash to remoteproc",
-		     pi.state, pi.fault, sd->pset[SP_P_wd_limit]);
+		if (pi.epoch != sd->amp.epoch)
+			logw(sd, "servo line corrupt (epoch word 0x%08x, this region's is %u) for %u cycles: reporting a crash to remoteproc",
+			     pi.epoch, sd->amp.epoch, sd->pset[SP_P_wd_limit]);
+		else
+			logw(sd, "servo faulted (state word 0x%08x, fault 0x%08x) for %u cycles: reporting a crash to remoteproc",
+			     pi.state, pi.fault, sd->pset[SP_P_wd_limit]);
 	} else {
 		logw(sd, "servo stalled (heartbeat still for %u cycles): reporting a crash to remoteproc",
 		     sd->pset[SP_P_wd_limit]);

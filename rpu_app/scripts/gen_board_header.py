@@ -178,6 +178,19 @@ def build(dts: Path, bindings: list[Path], board: str):
     put("BOARD_GTIMER_HZ", gt_hz)
     put("BOARD_GTIMER_TICKS_PER_US", gt_hz // 1_000_000)
 
+    twd = prop(servo, "idle-timer")
+    put("BOARD_TWD_BASE", one_reg(twd)[0], twd.path)
+    twd_hz = prop(twd, "clock-frequency")
+    wake_us = prop(servo, "idle-wake-us")
+    if not 100 <= wake_us <= 1_000_000:
+        fail(servo, "idle-wake-us must be 100..1000000")
+    twd_irq, _ = gic_id(twd, 0)
+    if not 16 <= twd_irq < 32:
+        fail(twd, "the private timer's interrupt must be a PPI")
+    put("BOARD_TWD_IRQ", twd_irq, "GIC ID (PPI, banked per CPU)")
+    put("BOARD_IDLE_WAKE_LOAD", twd_hz // 1_000_000 * wake_us - 1,
+        f"private timer reload: {wake_us} us")
+
     idx = prop(servo, "cycle-counter")
     if not 0 <= idx <= 2:
         fail(servo, "cycle-counter must be 0..2")

@@ -13,6 +13,7 @@
 #include "board.h"
 #include "gic.h"
 #include "gtimer.h"
+#include "idle_timer.h"
 #include "irq.h"
 #include "link.h"
 #include "log.h"
@@ -170,6 +171,7 @@ __attribute__((noreturn)) void servo_quiesce_and_park(void)
 {
 	cpu_irq_disable();
 	ttc_cycle_stop();
+	idle_timer_stop();
 	irq_release_all();
 	gic_cpu_disable();
 	log_printf("stop: STOP seen after %u cycles; interrupts released, timer stopped; parking at %p\n",
@@ -187,7 +189,7 @@ static void banner(void)
 
 __attribute__((noreturn)) void servo_main(void)
 {
-	uint32_t gt_ps, last_stats = 0, slept_at = 0;
+	uint32_t gt_ps, last_stats = 0, slept_at = 0, slept_wakes = 0;
 	int uart_ok;
 
 	cycles = 0;
@@ -249,6 +251,9 @@ __attribute__((noreturn)) void servo_main(void)
 	last_period_ns = ttc_period_ns();
 	irq_enable(BOARD_NEST_TEST_SGI);
 	irq_enable(BOARD_CYCLE_IRQ);
+	if (idle_timer_start())
+		log_printf("error: idle wake (private timer, irq %u) not registered: STOP is seen only while cycle interrupts come\n",
+			   (unsigned)BOARD_TWD_IRQ);
 	cpu_irq_enable();
 
 	log_printf("cycle: irq %u (%s) prio %02x, ttc %08x counter %u, period %u us "
@@ -292,11 +297,15 @@ __attribute__((noreturn)) void servo_main(void)
 			if (gtimer_changed())
 				log_printf("warning: global timer prescaler changed by its owner\n");
 		}
-		/* Sleep until the next interrupt, but only while cycle
-		 * interrupts keep arriving (one came since the last sleep) and
-		 * the distributor is enabled by its owner: if they stop, the
-		 * loop falls back to polling so STOP is still seen. */
-		if (CONFIG_IDLE_WFI && c != slept_at && gic_dist_enabled()) {
+		/* Sleep until the next interrupt while the distributor is
+		 * enabled by its owner: the cycle interrupt, or at the latest
+		 * the idle wake (idle_timer.h), so STOP is seen even when
+		 * cycle interrupts stop. Without the idle wake, only while
+		 * cycle interrupts keep arriving (one came since the last
+		 * sleep); else the loop polls. */
+		if (CONFIG_IDLE_WFI && gic_dist_enabled() &&
+		    (idle_timer_wakes() != slept_wakes || c != slept_at)) {
+			slept_wakes = idle_timer_wakes();
 			slept_at = c;
 			wfi();
 		}

@@ -718,7 +718,85 @@ static void test_watchdog_any_peer_state(void)
 	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
 	OCM->servo_line.epoch ^= 0x5a5a0000u;
 	CHECK_EQ(cycles_until_stalled(10, &first), 4);
-	CHECK_EQ(first, AMP_E_PEER_ABSENT);
+	CHECK_EQ(first, AMP_E_PEER_ERROR);
+
+	/* the servo's epoch word corrupted while the servo still beats (a
+	 * stray write from either core): once the servo has attached in this
+	 * epoch, another epoch word is a peer error, which servod recovers,
+	 * never "absent", which it would wait on forever (measured on the
+	 * board: devmem 0xffff0044 32 0xdeadbeef left the link down for good) */
+	fresh_pair(4);
+	beat_once();
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+	OCM->servo_line.epoch = 0xdeadbeefu;
+	for (int n = 0; n < 20; n++) {
+		amp_servo_heartbeat(&S);
+		CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_E_PEER_ERROR);
+	}
+	CHECK_EQ(amp_linux_peer(&L), AMP_E_PEER_ERROR);
+	/* the restarted servo attaches again and rewrites the word; it is a
+	 * restart (attach 2), and its feedback continues the sequence Linux
+	 * knows (a sequence back at 0 would be "reordered" for good) */
+	for (int n = 0; n < 3; n++) {
+		beat_once();
+		(void)amp_linux_cycle(&L, a, 1, 0, &rx);
+	}
+	CHECK_EQ(amp_servo_attach(&S, ocm_buf, sizeof(ocm_buf)), AMP_OK);
+	CHECK_EQ(OCM->servo_line.attach_count, 2);
+	CHECK_EQ(OCM->servo_line.epoch, L.epoch);
+	for (int n = 0; n < 5; n++) {
+		beat_once();
+		CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+		CHECK_EQ(rx.status, AMP_RX_FRESH);
+	}
+	/* before any attach in this epoch another epoch word is still just
+	 * "absent" (the servo of the previous epoch) */
+	memset(ocm_buf, 0, sizeof(ocm_buf));
+	CHECK_EQ(amp_linux_init(&L, ocm_buf, sizeof(ocm_buf), 4), AMP_OK);
+	OCM->servo_line.epoch = 0xdeadbeefu;
+	OCM->servo_line.state = AMP_SSTATE_RUNNING;
+	CHECK_EQ(amp_linux_peer(&L), AMP_E_PEER_ABSENT);
+}
+
+/* A semaphore word that is neither IDLE nor BUSY (a stray write from
+ * either core) is repaired by Linux and counted, never left to block the
+ * exchange or the mailbox for good. */
+static void test_garbled_semaphores(void)
+{
+	struct amp_cmd_axis a[1];
+	struct amp_rx_info rx;
+	struct amp_mbox_req q;
+	uint8_t buf[16];
+	struct amp_msg req = { .command = 7, .length = 4, .data = buf };
+	struct amp_msg resp = { .capacity = sizeof(buf), .data = buf };
+
+	fill_cmd(a, 1, 0);
+	fresh_pair(4);
+	memset(buf, 0x11, sizeof(buf));
+	beat_once();
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+	OCM->cyc_sem.sem = 0x5a5a5a5au;
+	beat_once();
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+	CHECK_EQ(L.st.sem_corrupt, 1);
+	CHECK_EQ(OCM->cyc_sem.sem, AMP_SEM_BUSY);
+	beat_once();
+	CHECK_EQ(OCM->cyc_sem.sem, AMP_SEM_IDLE);	/* the servo handed it back */
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+	CHECK_EQ(rx.status, AMP_RX_FRESH);
+	CHECK_EQ(L.st.sem_corrupt, 1);
+
+	OCM->mbox_sem.sem = 0xa5a5a5a5u;
+	CHECK_EQ(amp_linux_mbox_post(&L, &req), AMP_OK);
+	CHECK_EQ(L.st.sem_corrupt, 2);
+	CHECK_EQ(amp_servo_mbox_poll(&S, &q), 1);
+	CHECK_EQ(amp_servo_mbox_respond(&S, 0, buf, 4), AMP_OK);
+	CHECK_EQ(amp_linux_mbox_poll(&L, &resp), AMP_OK);
+	CHECK_EQ(resp.length, 4);
+	/* a real BUSY still means "the servo has the token" */
+	OCM->mbox_sem.sem = AMP_SEM_BUSY;
+	CHECK_EQ(amp_linux_mbox_post(&L, &req), AMP_E_BUSY);
+	CHECK_EQ(L.st.sem_corrupt, 2);
 }
 
 static void test_layout_constants(void)
@@ -752,6 +830,7 @@ int main(void)
 	test_wd_limit();
 	test_mbox_cancel();
 	test_watchdog_any_peer_state();
+	test_garbled_semaphores();
 	test_layout_constants();
 	return check_summary("amp_lib unit");
 }

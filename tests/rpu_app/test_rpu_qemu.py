@@ -146,13 +146,26 @@ def test_stop_park_restart_50_times(rpu_build, board_cfg, tmp_path):
     lo, hi = park_range(rpu_build)
     assert lo == board_cfg["BOARD_PARK_ADDR"]
     status = board_cfg["BOARD_STOP_STATUS_ADDR"]
+    # the firmware's cycle counter (.bss, zeroed at every start before it
+    # writes RUN!): each start runs until its first cycle interrupt has
+    # been counted, then is stopped. A fixed host sleep is not enough: on
+    # virtual time it may hold less than one period, and the idle wake
+    # (idle_timer.c) lets the firmware see STOP before any cycle.
+    cycles = _symbol_of(rpu_build / "servo.elf", "cycles")
+
+    def run_a_cycle(q: QemuRpu, i: int) -> None:
+        deadline = time.monotonic() + 5
+        while q.read_word(cycles) < 1:
+            assert time.monotonic() < deadline, f"start {i}: no cycle interrupt within 5 s"
+            time.sleep(0.005)
+
     t0 = time.monotonic()
     with QemuRpu(tmp_path / "q", rpu_build / "qemu-stub.elf", rpu_build / "servo.elf") as q:
         q.wait_uart(r"^running:", timeout=8)
         q.wait_word(status, RUN)
         stop_times = []
         for i in range(n):
-            time.sleep(0.02)  # let it run ~20 cycles
+            run_a_cycle(q, i)
             request_stop(q, board_cfg)
             stop_times.append(q.wait_word(status, PRKD, timeout=3))
             pc = q.cpu_pc(1)

@@ -62,6 +62,7 @@ struct amp_stats {
 	uint32_t peer_late;	/* Linux: semaphore still busy at cycle start */
 	uint32_t mbox_ok;
 	uint32_t mbox_err;
+	uint32_t sem_corrupt;	/* Linux: a semaphore word neither IDLE nor BUSY, repaired */
 };
 
 /* Heartbeat watchdog over the peer's counter, fed once per cycle. */
@@ -108,9 +109,10 @@ void amp_linux_close(struct amp_linux *l);
 
 /*
  * AMP_OK if the servo is attached to this epoch and running (or in safe
- * stop), AMP_E_PEER_ABSENT if not attached (other epoch, or state
- * OFFLINE), AMP_E_PEER_ERROR if attached but its state word says FAULT or
- * is no AMP_SSTATE_* at all.
+ * stop), AMP_E_PEER_ABSENT if not attached (state OFFLINE, or another
+ * epoch before its first attach in this one), AMP_E_PEER_ERROR if attached
+ * but its state word says FAULT or is no AMP_SSTATE_* at all, or its epoch
+ * word changed after it attached in this epoch (a stray write).
  */
 int amp_linux_peer(const struct amp_linux *l);
 
