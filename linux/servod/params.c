@@ -360,8 +360,20 @@ static int param_set(struct servod *sd, struct out *o, int id, const char *value
 		return status == SP_E_RANGE || status == SP_E_READONLY ? SE_VALUE : SE_SERVO;
 	}
 	rc = check_answer(sd, "set", id, len, resp, msg, n);
-	if (rc)
+	if (rc) {
+		/* The servo took the request and answered nonsense: whatever it
+		 * holds now is unknown. Put servod's parameter set back on it
+		 * (the one at the last attach, with this parameter unchanged). */
+		char why[160];
+		size_t used = strlen(msg);
+
+		if (params_restore(sd, why, sizeof(why)) == SE_OK)
+			snprintf(msg + used, n - used, "; servod's parameter set sent again (%s unchanged)", d->name);
+		else
+			snprintf(msg + used, n - used, "; sending servod's parameter set again failed (%s): "
+				 "the servo's parameters are unknown until it restarts", why);
 		return rc;
+	}
 	if (d->flags & SP_F_RESTORE) {
 		uint32_t old = sd->pset[id];
 

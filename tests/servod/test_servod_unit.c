@@ -225,6 +225,8 @@ static struct {
 	int32_t status;
 	uint32_t len;
 	int64_t w[2];
+	atomic_uint set_many;	/* parameter sets received */
+	atomic_int honest_sets;	/* answer parameter sets {n}, not as scripted */
 } fake;
 
 static _Alignas(64) uint8_t fake_ocm[AMP_OCM_SIZE];
@@ -243,6 +245,12 @@ static void *fake_servo(void *arg)
 		for (uint32_t i = 0; i < 2 && i < r.length / 4u; i++)
 			req[i] = (uint32_t)r.payload[4 * i] | (uint32_t)r.payload[4 * i + 1] << 8 |
 				 (uint32_t)r.payload[4 * i + 2] << 16 | (uint32_t)r.payload[4 * i + 3] << 24;
+		if (r.command == SP_CMD_PARAM_SET_MANY)
+			atomic_fetch_add(&fake.set_many, 1);
+		if (r.command == SP_CMD_PARAM_SET_MANY && atomic_load(&fake.honest_sets)) {
+			(void)amp_servo_mbox_respond(&fake.s, 0, req, 4);
+			continue;
+		}
 		for (int i = 0; i < 2; i++)
 			out[i] = fake.w[i] < 0 ? req[i] : (uint32_t)fake.w[i];
 		(void)amp_servo_mbox_respond(&fake.s, fake.status, out, fake.len);
@@ -327,6 +335,7 @@ static void test_param_answers_checked(void)
 	char path[] = "/tmp/servod-unit-params.XXXXXX", msg[256], body[512];
 	struct servod *sd = servod_with_fake_servo(path);
 	uint32_t pset0[SP_P_COUNT];
+	unsigned sets;
 	int rc;
 
 	memcpy(pset0, sd->pset, sizeof(pset0));
@@ -347,10 +356,16 @@ static void test_param_answers_checked(void)
 	fake_answer(0, 8, SP_P_wd_limit, 3);
 	CHECK_EQ(param_req(sd, "set", "axes", "3", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
 	CHECK_EQ(sd->axes, 4);
-	/* axes 9 (past AMP_MAX_AXES): refused, never servod's axis count */
+	/* axes 9 (past AMP_MAX_AXES): refused, never servod's axis count;
+	 * the servo may hold anything now, so servod's set is sent again */
 	fake_answer(0, 8, -1, AMP_MAX_AXES + 1);
+	atomic_store(&fake.honest_sets, 1);
+	sets = atomic_load(&fake.set_many);
 	CHECK_EQ(param_req(sd, "set", "axes", "3", msg, sizeof(msg), body, sizeof(body)), SE_SERVO);
 	CHECK(strstr(msg, "range") != 0);
+	CHECK(strstr(msg, "parameter set sent again (axes unchanged)") != 0);
+	CHECK_EQ(atomic_load(&fake.set_many), sets + 1);
+	atomic_store(&fake.honest_sets, 0);
 	CHECK_EQ(sd->axes, 4);
 	/* cycle_period_us 0 and 20000: refused, the period stays */
 	fake_answer(0, 8, -1, 0);
