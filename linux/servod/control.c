@@ -91,7 +91,7 @@ static void dispatch(struct servod *sd, struct control_client *c)
 		send_now(sd, c->fd, "OK\n", 3);
 	else
 		send_error(sd, c->fd, rc, msg);
-	if (rc == SE_OK && o.len)
+	if (o.len)	/* a body comes with errors too ("status" when the servo is offline) */
 		send_now(sd, c->fd, o.buf, o.len);
 	free(o.buf);
 }
