@@ -12,15 +12,19 @@
  *   ampctl [-s SOCKET] raw CMD NBYTES [WORD...]   raw mailbox request (tests)
  *   ampctl [-s SOCKET] run FILE.nc          run a G-code program (path as servod sees it)
  *   ampctl [-s SOCKET] stop                 decelerate along the path and hold
+ *   ampctl [-s SOCKET] -                    the request line from standard input,
+ *                                           sent as it arrives (scripts, tests)
  *
  * Exit status: 0 ok, 1 usage, 2 servod not reachable, 3 servo not running,
  * 4 timeout, 5 unknown parameter, 6 bad value (type/range), 7 other servo
  * error, 8 servod could not store the parameter file, 9 program refused
  * (unreadable or malformed: file:line:column: error), 10 a program is
- * already running (linux/servod/servod.h).
+ * already running (or servod has too many connections), 11 permission
+ * denied (only root and servod's uid may) (linux/servod/servod.h).
  */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -39,6 +43,7 @@ int main(int argc, char **argv)
 	int fd, i = 1, code;
 	ssize_t r;
 	char *all = 0;
+	int from_stdin;
 
 	if (argc > 2 && !strcmp(argv[1], "-s")) {
 		path = argv[2];
@@ -47,9 +52,12 @@ int main(int argc, char **argv)
 	if (i >= argc || !strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 		fprintf(stderr, "usage: ampctl [-s SOCKET] status | stats | param list | param get NAME |\n"
 				"              param set NAME VALUE | resume | debug hang|crash|fault|badparam|stack | raw CMD NBYTES [WORD...] |\n"
-				"              run FILE.nc | stop\n");
+				"              run FILE.nc | stop | -   (the request from standard input)\n");
 		return SE_USAGE;
 	}
+	from_stdin = i == argc - 1 && !strcmp(argv[i], "-");
+	if (from_stdin)
+		i = argc;
 	for (int first = i; i < argc; i++) {
 		const char *a = argv[i];
 		char abs[4096];
@@ -66,17 +74,24 @@ int main(int argc, char **argv)
 		}
 		len += (size_t)n;
 	}
-	req[len++] = '\n';
+	if (!from_stdin)
+		req[len++] = '\n';
 
+	signal(SIGPIPE, SIG_IGN);	/* servod may close before all is sent: its answer says why */
 	fd = socket(AF_UNIX, SOCK_STREAM, 0);
 	snprintf(sa.sun_path, sizeof(sa.sun_path), "%s", path);
 	if (fd < 0 || connect(fd, (struct sockaddr *)&sa, sizeof(sa))) {
 		fprintf(stderr, "ampctl: servod not reachable at %s: %s\n", path, strerror(errno));
 		return SE_NOSERVOD;
 	}
-	if (write(fd, req, len) != (ssize_t)len) {
+	if (from_stdin) {
+		/* copy as it arrives, until EOF or servod stops taking it */
+		while ((r = read(0, buf, sizeof(buf))) > 0)
+			if (write(fd, buf, (size_t)r) != r)
+				break;
+	} else if (write(fd, req, len) != (ssize_t)len) {
+		/* servod refused the connection and closed it: its answer says why */
 		fprintf(stderr, "ampctl: write: %s\n", strerror(errno));
-		return SE_NOSERVOD;
 	}
 	shutdown(fd, SHUT_WR);
 	while ((r = read(fd, buf, sizeof(buf))) > 0) {

@@ -96,6 +96,8 @@ struct servod {
 	struct fwtrace trace;
 	struct prog_runner prog;
 	int listen_fd;
+	struct control_client clients[CONTROL_CLIENTS];	/* control.c */
+	int board_lock_fd;		/* the OCM UIO device, flock()ed: one servod per board */
 };
 
 static inline int servod_quitting(const struct servod *sd)

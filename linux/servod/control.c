@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -42,26 +43,43 @@ static const struct servod_request *find_request(const char *name)
 	return 0;
 }
 
-static void handle_client(struct servod *sd, int fd)
+/* Writes what the socket takes now: a client that does not read its
+ * answer loses it (its socket buffer holds any normal answer). */
+static void send_now(struct servod *sd, int fd, const char *p, size_t n)
 {
-	char line[512], msg[512] = "", *argv[24], *save = 0, *tok;
+	while (n) {
+		ssize_t w = send(fd, p, n, MSG_NOSIGNAL | MSG_DONTWAIT);
+
+		if (w < 0 && errno == EINTR)
+			continue;
+		if (w <= 0) {
+			logm(sd, "control: answer not taken by the client (%s): dropped",
+			     w < 0 ? strerror(errno) : "closed");
+			return;
+		}
+		p += w;
+		n -= (size_t)w;
+	}
+}
+
+static void send_error(struct servod *sd, int fd, int rc, const char *msg)
+{
+	char head[CONTROL_LINE + 64];
+
+	snprintf(head, sizeof(head), "ERR %d %s\n", rc, msg);
+	send_now(sd, fd, head, strlen(head));
+}
+
+/* The request in c->line[0..got): dispatched, answered. */
+static void dispatch(struct servod *sd, struct control_client *c)
+{
+	char msg[512] = "", *argv[24], *save = 0, *tok;
 	struct out o = { malloc(1024), 0, 1024 };
 	const struct servod_request *req;
 	int argc = 0, rc = SE_USAGE;
-	ssize_t r = 0, got = 0;
-	struct pollfd pfd = { fd, POLLIN, 0 };
-	char head[600];
 
-	while (got < (ssize_t)sizeof(line) - 1 && poll(&pfd, 1, 1000) > 0) {
-		r = read(fd, line + got, sizeof(line) - 1 - (size_t)got);
-		if (r <= 0)
-			break;
-		got += r;
-		if (memchr(line, '\n', (size_t)got))
-			break;
-	}
-	line[got] = 0;
-	for (tok = strtok_r(line, " \t\r\n", &save); tok && argc < 24; tok = strtok_r(0, " \t\r\n", &save))
+	c->line[c->got] = 0;
+	for (tok = strtok_r(c->line, " \t\r\n", &save); tok && argc < 24; tok = strtok_r(0, " \t\r\n", &save))
 		argv[argc++] = tok;
 	if (!argc)
 		snprintf(msg, sizeof(msg), "empty request");
@@ -70,42 +88,149 @@ static void handle_client(struct servod *sd, int fd)
 	else
 		rc = req->fn(sd, &o, argc, argv, msg, sizeof(msg));
 	if (rc == SE_OK)
-		snprintf(head, sizeof(head), "OK\n");
+		send_now(sd, c->fd, "OK\n", 3);
 	else
-		snprintf(head, sizeof(head), "ERR %d %s\n", rc, msg);
-	if (write(fd, head, strlen(head)) < 0 || (o.len && write(fd, o.buf, o.len) < 0))
-		logm(sd, "client write: %s", strerror(errno));
+		send_error(sd, c->fd, rc, msg);
+	if (o.len)	/* a body comes with errors too ("status" when the servo is offline) */
+		send_now(sd, c->fd, o.buf, o.len);
 	free(o.buf);
+}
+
+static void drop(struct control_client *c)
+{
+	close(c->fd);
+	c->fd = -1;
+	c->got = 0;
+}
+
+/* Takes what the connection has sent (one read, never waits); dispatches
+ * once the line is complete (newline, full, or the client's EOF). */
+static void client_read(struct servod *sd, struct control_client *c)
+{
+	ssize_t r = read(c->fd, c->line + c->got, CONTROL_LINE - 1 - c->got);
+
+	if (r < 0 && (errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR))
+		return;
+	if (r > 0) {
+		c->got += (size_t)r;
+		if (!memchr(c->line, '\n', c->got) && c->got < CONTROL_LINE - 1)
+			return;
+	}
+	if (r >= 0)
+		dispatch(sd, c);
+	drop(c);
+}
+
+int control_peer_allowed(uid_t peer_uid, uid_t self_uid)
+{
+	return peer_uid == 0 || peer_uid == self_uid;
+}
+
+/* A new connection: its credentials, then a free slot. */
+static void client_accept(struct servod *sd, int fd)
+{
+	struct ucred cr;
+	socklen_t len = sizeof(cr);
+	uid_t self = geteuid();
+	char msg[160];
+
+	if (getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cr, &len) || len != sizeof(cr)) {
+		logw(sd, "control: connection refused: no peer credentials (%s)", strerror(errno));
+		close(fd);
+		return;
+	}
+	if (!control_peer_allowed(cr.uid, self)) {
+		logw(sd, "control: connection refused: uid %u (pid %d) is neither root nor servod's uid %u",
+		     (unsigned)cr.uid, (int)cr.pid, (unsigned)self);
+		snprintf(msg, sizeof(msg), "permission denied: only root and uid %u may use servod's socket",
+			 (unsigned)self);
+		send_error(sd, fd, SE_DENIED, msg);
+		close(fd);
+		return;
+	}
+	for (int i = 0; i < CONTROL_CLIENTS; i++) {
+		struct control_client *c = &sd->clients[i];
+
+		if (c->fd < 0) {
+			c->fd = fd;
+			c->got = 0;
+			c->deadline_ns = mono_now_ns() + CONTROL_REQUEST_MS * 1000000ull;
+			return;
+		}
+	}
+	logw(sd, "control: connection refused: %d requests already being received", CONTROL_CLIENTS);
+	send_error(sd, fd, SE_BUSY, "servod busy: too many connections sending their request");
+	close(fd);
 }
 
 int control_listen(struct servod *sd)
 {
 	struct sockaddr_un sa = { .sun_family = AF_UNIX };
 
-	sd->listen_fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	for (int i = 0; i < CONTROL_CLIENTS; i++)
+		sd->clients[i].fd = -1;
+	sd->listen_fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
 	snprintf(sa.sun_path, sizeof(sa.sun_path), "%s", sd->opt.sock_path);
+	/* a stale socket of a dead servod; a live one holds the board lock
+	 * (main.c), so this servod would not have come this far */
 	unlink(sd->opt.sock_path);
 	if (sd->listen_fd < 0 || bind(sd->listen_fd, (struct sockaddr *)&sa, sizeof(sa)) ||
-	    listen(sd->listen_fd, 8))
+	    chmod(sd->opt.sock_path, 0666) || listen(sd->listen_fd, 8))
 		return -1;
 	return 0;
 }
 
 void control_serve(struct servod *sd, int timeout_ms)
 {
-	struct pollfd pfd = { sd->listen_fd, POLLIN, 0 };
+	struct pollfd pfd[1 + CONTROL_CLIENTS];
+	struct control_client *slot[1 + CONTROL_CLIENTS];
+	uint64_t now = mono_now_ns();
+	nfds_t n = 1;
 
-	if (poll(&pfd, 1, timeout_ms) > 0) {
-		int cfd = accept4(sd->listen_fd, 0, 0, SOCK_CLOEXEC);
+	pfd[0] = (struct pollfd){ sd->listen_fd, POLLIN, 0 };
+	for (int i = 0; i < CONTROL_CLIENTS; i++) {
+		struct control_client *c = &sd->clients[i];
+		int64_t left;
 
-		if (cfd >= 0) {
-			handle_client(sd, cfd);
-			close(cfd);
+		if (c->fd < 0)
+			continue;
+		left = (int64_t)(c->deadline_ns - now) / 1000000;
+		if (left < timeout_ms)
+			timeout_ms = left < 0 ? 0 : (int)left;
+		slot[n] = c;
+		pfd[n++] = (struct pollfd){ c->fd, POLLIN, 0 };
+	}
+	if (poll(pfd, n, timeout_ms) < 0)
+		return;
+	for (nfds_t k = 1; k < n; k++)
+		if (pfd[k].revents)
+			client_read(sd, slot[k]);
+	now = mono_now_ns();
+	for (int i = 0; i < CONTROL_CLIENTS; i++) {
+		struct control_client *c = &sd->clients[i];
+
+		if (c->fd >= 0 && (int64_t)(now - c->deadline_ns) >= 0) {
+			logw(sd, "control: no whole request line within %d ms (%zu bytes): connection dropped",
+			     CONTROL_REQUEST_MS, c->got);
+			send_error(sd, c->fd, SE_USAGE, "no whole request line within the time allowed");
+			drop(c);
+		}
+	}
+	if (pfd[0].revents & POLLIN) {
+		for (int i = 0; i < 8; i++) {	/* the backlog, a few at a time */
+			int cfd = accept4(sd->listen_fd, 0, 0, SOCK_CLOEXEC | SOCK_NONBLOCK);
+
+			if (cfd < 0)
+				break;
+			client_accept(sd, cfd);
 		}
 	}
 }
 
 void control_close(struct servod *sd)
 {
+	for (int i = 0; i < CONTROL_CLIENTS; i++)
+		if (sd->clients[i].fd >= 0)
+			drop(&sd->clients[i]);
 	unlink(sd->opt.sock_path);
 }

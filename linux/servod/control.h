@@ -3,6 +3,19 @@
  * control.h - the local control socket (protocol in servod.h): one request
  * line per connection, dispatched by its first word to a handler.
  *
+ * The socket never makes the main thread wait on a client: the listening
+ * socket and the connections are non-blocking and served from the main
+ * loop's poll() (control_serve) between two rounds of the supervisor. A
+ * connection has CONTROL_REQUEST_MS from its accept to send its whole
+ * request line (a total deadline: bytes arriving do not extend it), else it
+ * is answered "ERR 1 ..." and closed; CONTROL_CLIENTS connections may be
+ * collecting their line at once (more are answered "ERR 10 ..."). The
+ * answer is written without waiting (a client that does not read it loses
+ * it). Who may connect: the peer's credentials (SO_PEERCRED) say root or
+ * servod's own uid; anyone else is answered "ERR 11 ..." and the refusal is
+ * logged. The socket file is made 0666 so that this check, not the file
+ * mode, is the one gate (and every refusal is seen and logged).
+ *
  * Each handler is declared beside its code with SERVOD_REQUEST("name", fn):
  * the declaration puts {name, fn} in the linker section "servod_requests",
  * which control.c walks; there is no central list to edit. A handler gets
@@ -14,8 +27,22 @@
 #define SERVOD_CONTROL_H
 
 #include <stddef.h>
+#include <stdint.h>
+#include <sys/types.h>
 
 struct servod;
+
+#define CONTROL_CLIENTS 4	/* connections collecting their request line at once */
+#define CONTROL_LINE 512	/* request line, with its newline */
+#define CONTROL_REQUEST_MS 1000	/* from accept to the whole line */
+
+/* A connection collecting its request line (fd -1: free). */
+struct control_client {
+	int fd;
+	size_t got;
+	uint64_t deadline_ns;	/* mono_now_ns() at accept + CONTROL_REQUEST_MS */
+	char line[CONTROL_LINE];
+};
 
 /* A growing answer body. */
 struct out {
@@ -37,9 +64,14 @@ struct servod_request {
 		__attribute__((used, section("servod_requests"), aligned(sizeof(void *)))) = \
 		{ name_, fn_ }
 
-/* The socket at sd->opt.sock_path: 0, or -1 (errno). */
+/* 1 if a peer with this uid may use the socket of a servod running as
+ * self_uid: root, or servod's own uid. */
+int control_peer_allowed(uid_t peer_uid, uid_t self_uid);
+/* The socket at sd->opt.sock_path (non-blocking, mode 0666): 0, or -1 (errno). */
 int control_listen(struct servod *sd);
-/* Serves the connection waiting on the socket, if any within timeout_ms. */
+/* Waits up to timeout_ms for the socket or a connection, then takes what
+ * is there without waiting: new connections, bytes of request lines,
+ * complete requests (dispatched), deadlines passed. */
 void control_serve(struct servod *sd, int timeout_ms);
 void control_close(struct servod *sd);
 

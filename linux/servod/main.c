@@ -6,7 +6,7 @@
  *          [--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N]
  *          [--telemetry ADDR:PORT|off] [--telemetry-token FILE] [--id CONTROLLER_ID]
  *          [--inc-per-mm N] [--vmax MM_S] [--amax MM_S2] [--travel MM]
- *          [--idle sine|hold] [-v]
+ *          [--idle sine|hold] [--max-program-s S] [-v]
  *
  * Threads: the cycle thread (cycle.c, SCHED_FIFO) exchanges with the servo
  * at every cycle interrupt; the main thread runs the supervisor
@@ -22,6 +22,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/mman.h>
 
 #include "context.h"
@@ -38,7 +39,7 @@ static void on_signal(int sig)
 
 static const struct servod_opts default_opts = {
 	SERVOD_SOCKET, SERVOD_PARAMS, 2000.0, 0.5, 133000000u, 80, 0, 100000000u, "127.0.0.1:7700",
-	"zynq7000_qemu", { 1000.0, 200.0, 2000.0, 500.0, 1000u, 0 }, "", TELEM_DEFAULT_PORT, NULL, { 0 }, 0,
+	"zynq7000_qemu", { 1000.0, 200.0, 2000.0, 500.0, 1000u, 0, PROG_MAX_S_DEFAULT }, "", TELEM_DEFAULT_PORT, NULL, { 0 }, 0,
 };
 
 static void usage(void)
@@ -46,7 +47,7 @@ static void usage(void)
 	fprintf(stderr, "usage: servod [-s SOCKET] [-p PARAMFILE] [-a AMPLITUDE_INC] [-f FREQ_HZ] "
 			"[--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N] "
 			"[--telemetry ADDR:PORT|off] [--telemetry-token FILE] [--id NAME] [--inc-per-mm N] [--vmax MM_S] "
-			"[--amax MM_S2] [--travel MM] [--idle sine|hold] [-v]\n");
+			"[--amax MM_S2] [--travel MM] [--idle sine|hold] [--max-program-s S] [-v]\n");
 }
 
 /* 0, or 1 with the reason on stderr. */
@@ -89,6 +90,8 @@ static int parse_options(struct servod_opts *o, int argc, char **argv)
 			o->prog.amax = atof(v);
 		else if (!strcmp(a, "--travel"))
 			o->prog.travel = atof(v);
+		else if (!strcmp(a, "--max-program-s"))
+			o->prog.max_s = (uint32_t)strtoul(v, 0, 0);
 		else if (!strcmp(a, "--idle") && !strcmp(v, "hold"))
 			o->prog.idle_hold = 1;
 		else if (!strcmp(a, "--idle") && !strcmp(v, "sine"))
@@ -97,8 +100,9 @@ static int parse_options(struct servod_opts *o, int argc, char **argv)
 			goto bad;
 		i++;
 	}
-	if (!(o->prog.inc_per_mm > 0 && o->prog.vmax > 0 && o->prog.amax > 0 && o->prog.travel > 0)) {
-		fprintf(stderr, "servod: --inc-per-mm, --vmax, --amax and --travel must be > 0\n");
+	if (!(o->prog.inc_per_mm > 0 && o->prog.vmax > 0 && o->prog.amax > 0 && o->prog.travel > 0 &&
+	      o->prog.max_s > 0)) {
+		fprintf(stderr, "servod: --inc-per-mm, --vmax, --amax, --travel and --max-program-s must be > 0\n");
 		return 1;
 	}
 	if (telemetry_parse_opt(o)) {
@@ -118,8 +122,20 @@ static int open_devices(struct servod *sd)
 {
 	uint32_t size, offs;
 
-	if (uio_open(sd, "ocm-mailbox", &sd->ocm, &size, &offs) < 0) {
+	sd->board_lock_fd = uio_open(sd, "ocm-mailbox", &sd->ocm, &size, &offs);
+	if (sd->board_lock_fd < 0) {
 		logm(sd, "no UIO device for the OCM mailbox (ocm-mailbox)");
+		return 1;
+	}
+	/* one servod per board: the lock on the OCM device, taken before
+	 * anything is touched (cycle interrupt, socket, region); the kernel
+	 * drops it when this servod ends, however it ends */
+	if (flock(sd->board_lock_fd, LOCK_EX | LOCK_NB)) {
+		if (errno == EWOULDBLOCK)
+			logm(sd, "another servod is running on this board (it holds the OCM mailbox device): "
+				 "exiting, nothing touched");
+		else
+			logm(sd, "flock on the OCM mailbox device: %s", strerror(errno));
 		return 1;
 	}
 	sd->ocm += offs;

@@ -10,10 +10,12 @@
  */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -30,6 +32,7 @@ void prog_init(struct prog_runner *pr, const struct prog_opts *o, pthread_mutex_
 {
 	pr->opt = *o;
 	pr->cycle_lock = cycle_lock;
+	pr->prog_fd = -1;
 	/* cannot fail: queue_buf is aligned and sized for PROG_QUEUE_N */
 	if (ring_init_buf(&pr->queue, pr->queue_buf, sizeof(pr->queue_buf), sizeof(struct motion_setpoint),
 			  PROG_QUEUE_N))
@@ -303,9 +306,68 @@ static void arm_run(struct prog_runner *pr, const char *path, uint32_t period_us
 	atomic_store(&pr->mode, PM_ARMED);
 }
 
+/* The program file, opened without waiting on it: a regular file only (a
+ * FIFO would block the reader, a device could do anything on open), of at
+ * most PROG_MAX_BYTES. SE_OK with *fdp, or SE_PROGRAM (msg). */
+static int open_program(const char *path, int *fdp, char *msg, size_t n)
+{
+	struct stat st;
+	int fd;
+
+	if (stat(path, &st)) {
+		snprintf(msg, n, "%s: %s", path, strerror(errno));
+		return SE_PROGRAM;
+	}
+	if (!S_ISREG(st.st_mode)) {
+		snprintf(msg, n, "%s: not a regular file (FIFOs, devices, sockets and directories are refused)",
+			 path);
+		return SE_PROGRAM;
+	}
+	fd = open(path, O_RDONLY | O_NONBLOCK | O_NOCTTY | O_CLOEXEC);
+	if (fd < 0) {
+		snprintf(msg, n, "%s: %s", path, strerror(errno));
+		return SE_PROGRAM;
+	}
+	if (fstat(fd, &st) || !S_ISREG(st.st_mode) || st.st_size > (off_t)PROG_MAX_BYTES) {
+		if (S_ISREG(st.st_mode))
+			snprintf(msg, n, "%s: %lld bytes, more than the %u servod takes", path,
+				 (long long)st.st_size, PROG_MAX_BYTES);
+		else
+			snprintf(msg, n, "%s: not a regular file (replaced while opened?)", path);
+		close(fd);
+		return SE_PROGRAM;
+	}
+	*fdp = fd;
+	return SE_OK;
+}
+
+/* The previous run's feeder: told to end, joined if it has (it checks the
+ * abort flag every few hundred setpoints); SE_BUSY if it has not within
+ * 200 ms, rather than waiting on it. */
+static int join_feeder(struct prog_runner *pr, char *msg, size_t n)
+{
+	struct timespec t;
+
+	if (!pr->feeder_alive)
+		return SE_OK;
+	atomic_store(&pr->feeder_abort, 1);
+	clock_gettime(CLOCK_REALTIME, &t);
+	t.tv_nsec += 200000000;
+	if (t.tv_nsec >= 1000000000) {
+		t.tv_sec++;
+		t.tv_nsec -= 1000000000;
+	}
+	if (pthread_timedjoin_np(pr->feeder_th, 0, &t)) {
+		snprintf(msg, n, "the previous program's feeder has not ended yet: try again");
+		return SE_BUSY;
+	}
+	pr->feeder_alive = 0;
+	return SE_OK;
+}
+
 int prog_run(struct prog_runner *pr, const char *path, uint32_t period_us, char *msg, size_t n)
 {
-	int m = atomic_load(&pr->mode), rc;
+	int m = atomic_load(&pr->mode), rc, fd = -1;
 
 	if (running(m)) {
 		snprintf(msg, n, "a program is running (%s): ampctl stop first", pr->info.path);
@@ -315,31 +377,33 @@ int prog_run(struct prog_runner *pr, const char *path, uint32_t period_us, char 
 		snprintf(msg, n, "path too long");
 		return SE_USAGE;
 	}
-	if (access(path, R_OK)) {
-		snprintf(msg, n, "%s: %s", path, strerror(errno));
-		return SE_PROGRAM;
-	}
-	if (pr->feeder_alive) {
-		atomic_store(&pr->feeder_abort, 1);
-		pthread_join(pr->feeder_th, 0);
-		pr->feeder_alive = 0;
-	}
+	rc = join_feeder(pr, msg, n);
+	if (rc)
+		return rc;
+	rc = open_program(path, &fd, msg, n);
+	if (rc)
+		return rc;
 	if (m == PM_SINE) {
 		rc = leave_sine(pr, msg, n);
-		if (rc)
+		if (rc) {
+			close(fd);
 			return rc;
+		}
 	}
 	pthread_mutex_lock(pr->cycle_lock);
 	if (!pr->play.have_hold) {
 		pthread_mutex_unlock(pr->cycle_lock);
+		close(fd);
 		snprintf(msg, n, "no feedback yet: the hold position is unknown (servo not attached?)");
 		return SE_OFFLINE;
 	}
 	arm_run(pr, path, period_us);
 	pthread_mutex_unlock(pr->cycle_lock);
 
+	pr->prog_fd = fd;
 	rc = prog_feeder_start(pr);
 	if (rc) {
+		close(fd);
 		pthread_mutex_lock(pr->cycle_lock);
 		prog_end_run(pr, PR_FAULT);
 		pthread_mutex_unlock(pr->cycle_lock);

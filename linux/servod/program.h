@@ -8,9 +8,12 @@
  * Threads:
  *  - the control thread (servod's main thread: ampctl requests) starts and
  *    stops runs: prog_run(), prog_stop(), prog_verdict();
- *  - one feeder thread per run (normal priority, program_feed.c) checks the
- *    whole program with a dry run through a second pipeline instance, then
- *    streams the file into the pipeline with its XOFF/XON watermark flow
+ *  - one feeder thread per run (normal priority, program_feed.c) reads the
+ *    program once into memory from the file prog_run() opened and checked
+ *    (a regular file of at most PROG_MAX_BYTES), checks the whole program
+ *    with a dry run through a second pipeline instance (at most
+ *    opt.max_s seconds of motion), then streams the same text into the
+ *    pipeline with its XOFF/XON watermark flow
  *    control and calls motion_next_setpoint() ahead of time into a
  *    lock-free SPSC queue of setpoints (queue: motion/ring.h, in the
  *    runner's own storage);
@@ -43,6 +46,8 @@
 
 #define PROG_AXES 3u		/* X Y Z drive servo axes 0 1 2 */
 #define PROG_QUEUE_N 1024u	/* setpoints buffered ahead (1.02 s at 1 ms), a power of two */
+#define PROG_MAX_BYTES (16u << 20)	/* largest program file servod takes */
+#define PROG_MAX_S_DEFAULT 3600u	/* longest program (its dry run's setpoints), s */
 
 struct out;
 
@@ -53,6 +58,7 @@ struct prog_opts {
 	double travel;		/* travel limit, +-mm around 0 (500) */
 	uint32_t period_us;	/* cycle period (the pipeline's interpolation period) */
 	int idle_hold;		/* 0: servod's sine until the first run; 1: hold from the start */
+	uint32_t max_s;		/* longest program, s (--max-program-s): the dry run stops there */
 };
 
 enum prog_mode { PM_SINE, PM_HOLD, PM_ARMED, PM_RUN, PM_STOPPING };
@@ -98,8 +104,10 @@ struct prog_runner {
 	/* the feeder thread */
 	pthread_t feeder_th;
 	int feeder_alive;
+	int prog_fd;			/* opened and checked by prog_run, read and closed by the feeder */
+	char *text;			/* the program, read once: dry run and run use the same text */
+	size_t text_len;
 	int32_t run_start[AMP_MAX_AXES];
-	char feed_buf[4096];
 };
 
 /* Before the cycle thread starts. cycle_lock: servod's sd->lock. */
@@ -119,7 +127,9 @@ void prog_feedback(struct prog_runner *pr, int rc, const struct amp_fb_record *f
 void prog_end_run(struct prog_runner *pr, int res);
 
 /* ---- control thread ------------------------------------------------------------ */
-/* Starts a run (0) or fails (SE_* code, message in msg). */
+/* Starts a run (0) or fails (SE_* code, message in msg). Never waits on
+ * the file: it must be a regular file (stat, then opened O_NONBLOCK and
+ * checked again with fstat) of at most PROG_MAX_BYTES. */
 int prog_run(struct prog_runner *pr, const char *path, uint32_t period_us, char *msg, size_t n);
 /* 1 when the dry run finished (verdict in msg: "ok ..." or the error), 0 while it runs. */
 int prog_verdict(struct prog_runner *pr, int *refused, char *msg, size_t n);

@@ -1,15 +1,20 @@
 // SPDX-License-Identifier: MIT
 /*
- * program_feed.c - the feeder thread of a program run (program.h): the dry
- * run through a second pipeline instance, then the file streamed into the
- * run's pipeline and its setpoints into the setpoint queue.
+ * program_feed.c - the feeder thread of a program run (program.h): the
+ * program read once into memory from the file prog_run() opened and
+ * checked, the dry run of that text through a second pipeline instance
+ * (bounded: at most opt.max_s seconds of motion), then the same text
+ * streamed into the run's pipeline and its setpoints into the setpoint
+ * queue.
  */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
 #include <sched.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -44,33 +49,74 @@ static void pause_2ms(void)
 struct sink {
 	int to_queue;		/* 0: dry run (count, keep the last) */
 	uint64_t n;
+	uint64_t limit;		/* dry run: most setpoints taken (opt.max_s) */
 	struct motion_setpoint last;
 };
 
-/* Writes the file into m while the pipeline says XON (it raises XOFF at
- * stream_high and XON again once drained to stream_low). 1 once the input
- * ended (or the pipeline faulted and takes no more), 0, or -1 (msg). */
-static int feed_input(struct prog_runner *pr, struct motion *m, int fd, const char *path, size_t *have,
-		      size_t *off, char *msg, size_t msgn)
+/* Reads the program from pr->prog_fd (a regular file prog_run opened and
+ * checked) into pr->text, at most PROG_MAX_BYTES, and closes the file.
+ * 0, or -1 (msg). */
+static int load_program(struct prog_runner *pr, const char *path, char *msg, size_t msgn)
+{
+	int fd = pr->prog_fd;
+	struct stat st;
+	size_t cap, len = 0;
+	char *buf;
+
+	pr->prog_fd = -1;
+	cap = (fstat(fd, &st) == 0 && st.st_size > 0 ? (size_t)st.st_size : 0) + 4096u;
+	if (cap > PROG_MAX_BYTES + 1u)
+		cap = PROG_MAX_BYTES + 1u;
+	buf = malloc(cap);
+	while (buf) {
+		ssize_t r = read(fd, buf + len, cap - len);
+
+		if (r < 0 && errno == EINTR)
+			continue;
+		if (r < 0) {
+			snprintf(msg, msgn, "%s: read: %s", path, strerror(errno));
+			break;
+		}
+		if (r == 0) {
+			close(fd);
+			pr->text = buf;
+			pr->text_len = len;
+			return 0;
+		}
+		len += (size_t)r;
+		if (len > PROG_MAX_BYTES) {
+			snprintf(msg, msgn, "%s: more than the %u bytes servod takes", path, PROG_MAX_BYTES);
+			break;
+		}
+		if (len == cap) {	/* the file grew while read */
+			char *nb = realloc(buf, cap + 65536u);
+
+			if (!nb)
+				break;
+			buf = nb;
+			cap += 65536u;
+		}
+	}
+	if (!buf || !msg[0])
+		snprintf(msg, msgn, "%s: out of memory", path);
+	free(buf);
+	close(fd);
+	return -1;
+}
+
+/* Writes the program text into m while the pipeline says XON (it raises
+ * XOFF at stream_high and XON again once drained to stream_low). 1 once
+ * the text ended (or the pipeline faulted and takes no more), else 0. */
+static int feed_input(struct prog_runner *pr, struct motion *m, size_t *off)
 {
 	while (motion_stream_flow(m) == MOTION_FLOW_XON) {
 		long w;
 
-		if (*off == *have) {
-			ssize_t r = read(fd, pr->feed_buf, sizeof(pr->feed_buf));
-
-			if (r < 0) {
-				snprintf(msg, msgn, "%s: read: %s", path, strerror(errno));
-				return -1;
-			}
-			if (r == 0) {
-				motion_stream_end(m);
-				return 1;
-			}
-			*have = (size_t)r;
-			*off = 0;
+		if (*off == pr->text_len) {
+			motion_stream_end(m);
+			return 1;
 		}
-		w = motion_stream_write(m, pr->feed_buf + *off, *have - *off);
+		w = motion_stream_write(m, pr->text + *off, pr->text_len - *off);
 		if (w < 0)	/* the pipeline faulted: it takes no more input */
 			return 1;
 		*off += (size_t)w;
@@ -80,37 +126,25 @@ static int feed_input(struct prog_runner *pr, struct motion *m, int fd, const ch
 	return 0;
 }
 
-/* Streams the file into m with the pipeline's flow control and takes its
- * setpoints until DONE / FAULT. Returns the final status, or -1 (aborted
- * or I/O error: msg). */
+/* Streams the program into m with the pipeline's flow control and takes
+ * its setpoints until DONE / FAULT. Returns the final status, or -1
+ * (aborted, or the dry run's bound reached: msg). */
 static int stream_program(struct prog_runner *pr, struct motion *m, const char *path, struct sink *k, char *msg,
 			  size_t msgn)
 {
-	size_t have = 0, off = 0;
-	int fd = open(path, O_RDONLY | O_CLOEXEC), ended = 0;
+	size_t off = 0;
+	int ended = 0;
 	uint32_t batches = 0;
 
-	if (fd < 0) {
-		snprintf(msg, msgn, "%s: %s", path, strerror(errno));
-		return -1;
-	}
 	for (;;) {
 		uint32_t room;
 
 		if (atomic_load(&pr->feeder_abort)) {
-			close(fd);
 			snprintf(msg, msgn, "aborted");
 			return -1;
 		}
-		if (!ended) {
-			int rc = feed_input(pr, m, fd, path, &have, &off, msg, msgn);
-
-			if (rc < 0) {
-				close(fd);
-				return -1;
-			}
-			ended = rc;
-		}
+		if (!ended)
+			ended = feed_input(pr, m, &off);
 		/* output */
 		room = k->to_queue ? ring_room(&pr->queue) : 512u;
 		if (!room) {
@@ -125,9 +159,13 @@ static int stream_program(struct prog_runner *pr, struct motion *m, const char *
 				ring_push(&pr->queue, &sp);
 			k->last = sp;
 			k->n++;
-			if (st == MOTION_ST_DONE || st == MOTION_ST_FAULT || st == MOTION_ST_UNDERRUN) {
-				close(fd);
+			if (st == MOTION_ST_DONE || st == MOTION_ST_FAULT || st == MOTION_ST_UNDERRUN)
 				return st;
+			if (!k->to_queue && k->n > k->limit) {
+				snprintf(msg, msgn, "%s:%u: error: the program runs longer than %u s "
+					 "(servod --max-program-s): a long dwell (G4 P) or a very low feed (F)?",
+					 path, sp.line, pr->opt.max_s);
+				return -1;
 			}
 			if (!ended && motion_stream_flow(m) == MOTION_FLOW_XON)
 				break;	/* drained to the low watermark: refill first */
@@ -165,6 +203,7 @@ static int dry_run(struct prog_runner *pr, const struct motion_config *cfg, uint
 		return -1;
 	}
 	memset(&k, 0, sizeof(k));
+	k.limit = (uint64_t)pr->opt.max_s * 1000000u / (cfg->period_us ? cfg->period_us : 1u);
 	st = stream_program(pr, m, pr->info.path, &k, msg, n);
 	if (st == MOTION_ST_FAULT || st == MOTION_ST_UNDERRUN)
 		fmt_error(motion_last_error(m), pr->info.path, msg, n);
@@ -236,7 +275,7 @@ static void *feeder_main(void *arg)
 	uint64_t t0 = mono_now_ns();
 
 	motion_cfg(pr, &cfg, pr->run_start);
-	if (dry_run(pr, &cfg, t0, msg, sizeof(msg))) {
+	if (load_program(pr, pr->info.path, msg, sizeof(msg)) || dry_run(pr, &cfg, t0, msg, sizeof(msg))) {
 		pthread_mutex_lock(&pr->info_lock);
 		snprintf(pr->info.error, sizeof(pr->info.error), "%s", msg);
 		pr->info.verdict = 2;
@@ -252,6 +291,9 @@ static void *feeder_main(void *arg)
 		atomic_compare_exchange_strong(&pr->result, &want, PR_RUNNING);
 		real_run(pr, &cfg);
 	}
+	free(pr->text);
+	pr->text = 0;
+	pr->text_len = 0;
 	atomic_store(&pr->feeder_done, 1);
 	return 0;
 }

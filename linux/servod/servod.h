@@ -25,7 +25,8 @@ enum servod_err {
 	SE_SERVO = 7,		/* the servo answered with another error */
 	SE_IO = 8,		/* servod could not store the parameter file */
 	SE_PROGRAM = 9,		/* G-code program refused (unreadable, malformed: file:line:col) */
-	SE_BUSY = 10,		/* a program is running */
+	SE_BUSY = 10,		/* a program is running (or servod has too many connections) */
+	SE_DENIED = 11,		/* the caller may not use servod's socket (root and servod's uid may) */
 };
 
 #endif

@@ -8,6 +8,9 @@ Documentation     The cycle end to end on the emulated board, in ONE boot:
 ...               FAULT-then-hang and an SVC stack overflow (guard page)
 ...               detected by servod and recovered by remoteproc with the
 ...               parameters restored, out-of-range parameter answers refused,
+...               the control socket (a trickling client does not stall the
+...               supervisor, another uid is refused, one servod per board),
+...               `run` on a FIFO and a program of days refused,
 ...               servod killed -> safe stop reported by
 ...               the servo. On virtual time (-icount, the default) no cycle
 ...               may be missed on either side and both sides count the same
@@ -466,6 +469,93 @@ SVC Stack Overflow Is A Crash, Not Silent, And Is Recovered
     # the restarted firmware painted its stack again: a normal mark
     Should Be True    0 < ${b}[servo.svc_stack_used] < ${b}[servo.svc_stack_size]
     Log    SVC stack high-water mark after the recovery: ${b}[servo.svc_stack_used] bytes    console=True
+    ${r}=    Exchange Window    1
+    Exchange Should Run    ${r}
+
+A Client Trickling Its Request Does Not Stall The Supervisor
+    [Documentation]    Issue 13, item 7: clients that send one byte every
+    ...    0.3 s (never a whole line) connect one after the other while the
+    ...    firmware hangs. servod's main thread never waits on them: each is
+    ...    dropped 1 s after it connected (ERR 1), `ampctl` is still served,
+    ...    the stall is detected and recovered, the parameters restored.
+    ...    (Before: each trickling client held the main thread for 100 x
+    ...    0.3 s, the deadline restarting at every byte.)
+    Ampctl    param set wd_limit 10
+    ${n}=    Servod Log Count    recovery complete
+    ${a}=    Stats
+    Execute Shell Command    touch /tmp/trickle.on; rm -f /tmp/trickle.out; ( (while [ -e /tmp/trickle.on ]; do (j=0; while [ $j -lt 100 ]; do printf s; sleep 0.3; j=$((j+1)); done) | ampctl - >>/tmp/trickle.out 2>&1; done) >/dev/null 2>&1 & )
+    Execute Shell Command    sleep 0.5
+    ${out}=    Ampctl    debug hang
+    Wait For Servod Log    recovery complete    ${n + 1}    tries=200
+    ${b}=    Stats
+    Execute Shell Command    rm -f /tmp/trickle.on; sleep 1.5
+    ${tr}=    Execute Shell Command    cat /tmp/trickle.out
+    Log    trickling clients got: ${tr}    console=True
+    Should Contain    ${tr}    no whole request line within the time allowed
+    ${dropped}=    Servod Log Count    no whole request line within 1000 ms
+    Should Be True    ${dropped} >= 1
+    ${rec}=    Delta    ${a}    ${b}    linux.recoveries
+    Should Be True    ${rec} >= 1
+    Should Be Equal    ${b}[servo.state]    RUNNING
+    Param Should Be    pos_kp    61.5
+    Ampctl    param set wd_limit ${K}
+    ${r}=    Exchange Window    1
+    Exchange Should Run    ${r}
+
+Another Uid Is Refused By The Control Socket
+    [Documentation]    Issue 13, item 7: only root and servod's own uid may
+    ...    use the socket (SO_PEERCRED); uid 1000 gets exit 11 and servod
+    ...    logs the refusal.
+    Execute Shell Command    grep -q '^op:' /etc/passwd 2>/dev/null || echo 'op:x:1000:1000:op:/tmp:/bin/sh' >> /etc/passwd
+    ${out}=    Execute Shell Command    su op -c 'ampctl stats' 2>&1    expected_rc=11
+    Should Contain    ${out}    permission denied
+    Wait For Servod Log    connection refused: uid 1000
+    Ampctl    stats
+
+A Second Servod Is Refused While The First Runs
+    [Documentation]    Issue 13, item 7: one servod per board. A second one
+    ...    (same socket, or another) exits at once with a message and touches
+    ...    nothing: the first keeps its socket and its exchange.
+    ${pid}=    Execute Shell Command    pidof servod
+    FOR    ${args}    IN    ${EMPTY}    -s /tmp/second.sock
+        ${out}=    Execute Shell Command    timeout 20 servod ${args} 2>&1; echo "rc=$?"    timeout=60 s
+        Log    ${out}    console=True
+        Should Contain    ${out}    another servod is running on this board
+        Should Contain    ${out}    rc=1
+    END
+    ${pid2}=    Execute Shell Command    pidof servod
+    Should Be Equal    ${pid}    ${pid2}
+    ${r}=    Exchange Window    1
+    Exchange Should Run    ${r}
+
+Run On A FIFO Is Refused At Once And The Next Run Works
+    [Documentation]    Issue 13, item 8: `run` opens the file itself, without
+    ...    waiting (O_NONBLOCK), and takes regular files only. (Before: the
+    ...    feeder blocked in open() on the FIFO and the next `run` hung
+    ...    servod's main thread in pthread_join.)
+    Execute Shell Command    rm -f /tmp/prog.fifo; mkfifo /tmp/prog.fifo
+    ${out}=    Ampctl    run /tmp/prog.fifo    expected_rc=9
+    Should Contain    ${out}    not a regular file
+    ${out}=    Ampctl    run /usr/share/servoamp/examples/seed004_squares_circles.nc
+    Should Contain    ${out}    checked
+    ${out}=    Ampctl    stop
+    Should Contain    ${out}    stopped
+    ${st}=    Ampctl    status
+    Should Contain    ${st}    program.state=stopped
+
+A Program That Would Run For Days Is Refused With Its Line
+    [Documentation]    Issue 13, item 8: G4 P999999999 (a dwell of 31 years)
+    ...    is refused by the dry run once it passes --max-program-s (3600 s
+    ...    of setpoints), with the file and line; the axes hold.
+    Execute Shell Command    printf 'G21 G90\\nG4 P999999999\\nM2\\n' > /tmp/dwell.nc
+    # the dry run keeps Linux's CPU busy: `run` answers after 5 s of
+    # guest time, "still checking" (or the verdict)
+    ${out}=    Execute Shell Command    ampctl run /tmp/dwell.nc 2>&1    expected_rc=any    timeout=300 s
+    Log    ${out}    console=True
+    ${st}=    Execute Shell Command    i=0; while ! ampctl status | grep -q program.state=refused && [ $i -lt 600 ]; do sleep 0.2; i=$((i+1)); done; ampctl status    timeout=300 s
+    Should Contain    ${st}    program.state=refused
+    Should Contain    ${st}    program.error=/tmp/dwell.nc:2: error: the program runs longer than 3600 s
+    Should Contain    ${st}    program.mode=hold
     ${r}=    Exchange Window    1
     Exchange Should Run    ${r}
 

@@ -6,9 +6,17 @@
  * commands and feedback, and the request table.
  */
 #define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "check.h"
@@ -62,7 +70,7 @@ static struct servod *new_servod(int idle_hold)
 	memset(sd, 0, sizeof(*sd));
 	sd->opt.amplitude = 2000.0;
 	sd->opt.freq = 0.5;
-	sd->opt.prog = (struct prog_opts){ 1000.0, 200.0, 2000.0, 500.0, 1000u, idle_hold };
+	sd->opt.prog = (struct prog_opts){ 1000.0, 200.0, 2000.0, 500.0, 1000u, idle_hold, PROG_MAX_S_DEFAULT };
 	sd->period_ns = 1000000u;
 	sd->axes = 4;
 	pthread_mutex_init(&sd->lock, 0);
@@ -514,6 +522,294 @@ static void test_peer_error(void)
 	CHECK_EQ(st.stalls, 2);
 }
 
+/* ---- issue 13, item 7: the control socket never makes the main thread wait ---- */
+
+static int client_connect(const char *path)
+{
+	struct sockaddr_un sa = { .sun_family = AF_UNIX };
+	int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+
+	snprintf(sa.sun_path, sizeof(sa.sun_path), "%s", path);
+	if (fd >= 0 && connect(fd, (struct sockaddr *)&sa, sizeof(sa))) {
+		close(fd);
+		return -1;
+	}
+	return fd;
+}
+
+/* What the client has received so far without waiting: bytes (answer in
+ * buf), 0 at EOF, -1 nothing yet. */
+static ssize_t client_take(int fd, char *buf, size_t n)
+{
+	ssize_t r = recv(fd, buf, n - 1, MSG_DONTWAIT);
+
+	buf[r > 0 ? r : 0] = 0;
+	return r < 0 && errno == EAGAIN ? -1 : r;
+}
+
+/* Serves until the client has an answer (bounded); returns its length. */
+static ssize_t serve_until_answer(struct servod *sd, int fd, char *buf, size_t n)
+{
+	ssize_t r = -1;
+
+	for (int i = 0; i < 500 && r < 0; i++) {
+		control_serve(sd, 20);
+		r = client_take(fd, buf, n);
+	}
+	return r;
+}
+
+static struct servod *servod_listening(char *path)
+{
+	struct servod *sd = new_servod(0);
+	int fd = mkstemp(path);
+
+	CHECK(fd >= 0);
+	close(fd);
+	unlink(path);
+	sd->opt.sock_path = path;
+	CHECK_EQ(control_listen(sd), 0);
+	return sd;
+}
+
+static void test_control_trickle(void)
+{
+	char path[] = "/tmp/servod-unit-sock.XXXXXX", ans[256];
+	struct servod *sd = servod_listening(path);
+	struct stat st;
+	int a, b;
+
+	CHECK(stat(path, &st) == 0 && (st.st_mode & 0777) == 0666);
+	/* A trickles its request, B sends a whole one: B is answered while A
+	 * has not finished; A is answered once its line is complete */
+	a = client_connect(path);
+	CHECK(a >= 0);
+	CHECK_EQ(write(a, "sto", 3), 3);
+	control_serve(sd, 0);
+	control_serve(sd, 0);
+	b = client_connect(path);
+	CHECK(b >= 0);
+	CHECK_EQ(write(b, "stop\n", 5), 5);
+	CHECK(serve_until_answer(sd, b, ans, sizeof(ans)) > 0);
+	CHECK(!strncmp(ans, "OK\n", 3));
+	CHECK_EQ(client_take(a, ans, sizeof(ans)), -1);	/* A: nothing yet, not closed */
+	CHECK_EQ(write(a, "p\n", 2), 2);
+	CHECK(serve_until_answer(sd, a, ans, sizeof(ans)) > 0);
+	CHECK(!strncmp(ans, "OK\n", 3));
+	if (strncmp(ans, "OK\n", 3))
+		printf("  trickled request answered: %s", ans);
+	close(a);
+	close(b);
+	/* a line never completed: answered and closed at the deadline, which
+	 * bytes arriving do not extend */
+	a = client_connect(path);
+	CHECK(a >= 0);
+	CHECK_EQ(write(a, "s", 1), 1);
+	for (int i = 0; i < 8; i++) {
+		struct timespec ts = { 0, 150000000 };
+
+		control_serve(sd, 0);
+		nanosleep(&ts, 0);
+		if (send(a, "t", 1, MSG_NOSIGNAL) != 1)
+			break;
+	}
+	CHECK(serve_until_answer(sd, a, ans, sizeof(ans)) > 0);
+	CHECK(!strncmp(ans, "ERR 1 no whole request line", 27));
+	close(a);
+	control_close(sd);
+	free(sd);
+}
+
+/* Only root and servod's own uid: another uid is refused with ERR 11. */
+static void test_control_peer(void)
+{
+	char path[] = "/tmp/servod-unit-sock.XXXXXX", ans[256];
+	struct servod *sd;
+	pid_t pid;
+	int status = -1;
+
+	CHECK(control_peer_allowed(0, 1000));
+	CHECK(control_peer_allowed(1000, 1000));
+	CHECK(!control_peer_allowed(1001, 1000));
+	CHECK(!control_peer_allowed(1001, 0));
+	if (geteuid() != 0) {
+		printf("  (not root: a connection from another uid is not tried)\n");
+		return;
+	}
+	sd = servod_listening(path);
+	pid = fork();
+	if (pid == 0) {	/* another uid asks for "stop" */
+		int fd;
+
+		if (setresgid(65534, 65534, 65534) || setresuid(65534, 65534, 65534))
+			_exit(3);
+		fd = client_connect(path);
+		if (fd < 0)
+			_exit(2);
+		/* servod may have refused and closed already: then its answer waits */
+		(void)send(fd, "stop\n", 5, MSG_NOSIGNAL);
+		shutdown(fd, SHUT_WR);
+		ssize_t r = read(fd, ans, sizeof(ans) - 1);
+
+		ans[r > 0 ? r : 0] = 0;
+		_exit(!strncmp(ans, "ERR 11 permission denied", 24) ? 0 : 1);
+	}
+	CHECK(pid > 0);
+	for (int i = 0; i < 500 && waitpid(pid, &status, WNOHANG) == 0; i++)
+		control_serve(sd, 20);
+	CHECK(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+	if (!WIFEXITED(status) || WEXITSTATUS(status))
+		printf("  other uid's client: status 0x%x (2: could not connect, 1: not refused)\n", status);
+	control_close(sd);
+	free(sd);
+}
+
+/* ---- issue 13, item 8: run FILE ------------------------------------------------ */
+
+static struct servod *servod_holding(void)
+{
+	struct servod *sd = new_servod(1);
+	struct amp_fb_record fb;
+
+	memset(&fb, 0, sizeof(fb));
+	fb.n_axes = 4;
+	setpoint_program.feedback(sd, AMP_OK, &fb, 4, 1);	/* hold position known */
+	return sd;
+}
+
+static void write_file(const char *path, const char *text)
+{
+	FILE *f = fopen(path, "w");
+
+	CHECK(f != 0);
+	fputs(text, f);
+	fclose(f);
+}
+
+/* Waits (bounded: 120 s) for the dry run's verdict: 1 refused, 0 ok, -1 none. */
+static int wait_verdict(struct servod *sd, char *msg, size_t n)
+{
+	int refused = 0;
+
+	for (int i = 0; i < 12000; i++) {
+		struct timespec ts = { 0, 10000000 };
+
+		if (prog_verdict(&sd->prog, &refused, msg, n))
+			return refused;
+		nanosleep(&ts, 0);
+	}
+	return -1;
+}
+
+static void end_feeder(struct servod *sd)
+{
+	if (sd->prog.feeder_alive) {
+		atomic_store(&sd->prog.feeder_abort, 1);
+		pthread_join(sd->prog.feeder_th, 0);
+		sd->prog.feeder_alive = 0;
+	}
+}
+
+static void test_run_fifo_refused(void)
+{
+	char dir[] = "/tmp/servod-unit-run.XXXXXX", fifo[64], good[64], msg[512];
+	struct servod *sd = servod_holding();
+
+	CHECK(mkdtemp(dir) != 0);
+	snprintf(fifo, sizeof(fifo), "%s/fifo.nc", dir);
+	snprintf(good, sizeof(good), "%s/good.nc", dir);
+	CHECK_EQ(mkfifo(fifo, 0600), 0);
+	write_file(good, "G21 G90\nG1 X1 F600\nM2\n");
+	CHECK_EQ(prog_run(&sd->prog, fifo, 1000, msg, sizeof(msg)), SE_PROGRAM);
+	CHECK(strstr(msg, "not a regular file") != 0);
+	CHECK_EQ(prog_run(&sd->prog, dir, 1000, msg, sizeof(msg)), SE_PROGRAM);
+	/* and the next run works */
+	CHECK_EQ(prog_run(&sd->prog, good, 1000, msg, sizeof(msg)), SE_OK);
+	CHECK_EQ(wait_verdict(sd, msg, sizeof(msg)), 0);
+	end_feeder(sd);
+	unlink(fifo);
+	unlink(good);
+	rmdir(dir);
+	free(sd);
+}
+
+/* A program longer than opt.max_s (a dwell, a feed near 0) is refused by
+ * the dry run, with its line. */
+static void test_run_dry_run_bounded(void)
+{
+	static const struct {
+		const char *text;
+		const char *where;
+	} t[] = {
+		{ "G4 P999999999\nM2\n", ":1: error: the program runs longer than 3600 s" },
+		{ "G21 G90\nF0.000001\nG1 X1\nM2\n", ":3: error: the program runs longer than 3600 s" },
+	};
+	char path[] = "/tmp/servod-unit-prog.XXXXXX", msg[512];
+	int fd = mkstemp(path);
+
+	CHECK(fd >= 0);
+	close(fd);
+	for (size_t i = 0; i < sizeof(t) / sizeof(t[0]); i++) {
+		struct servod *sd = servod_holding();
+
+		write_file(path, t[i].text);
+		CHECK_EQ(prog_run(&sd->prog, path, 1000, msg, sizeof(msg)), SE_OK);
+		CHECK_EQ(wait_verdict(sd, msg, sizeof(msg)), 1);
+		CHECK(strstr(msg, t[i].where) != 0);
+		printf("  %s", msg);
+		printf("\n");
+		CHECK_EQ(atomic_load(&sd->prog.mode), PM_HOLD);
+		end_feeder(sd);
+		free(sd);
+	}
+	unlink(path);
+}
+
+/* The program that runs is the program that was checked: the file changed
+ * after the dry run (its last move made malformed) changes nothing. */
+static void test_run_checked_text_runs(void)
+{
+	char path[] = "/tmp/servod-unit-prog.XXXXXX", msg[512];
+	struct servod *sd = servod_holding();
+	struct amp_cmd_axis cmd[AMP_MAX_AXES];
+	int fd = mkstemp(path);
+	FILE *f = fdopen(fd, "w");
+	long tail;
+	uint32_t seq = 1;
+
+	CHECK(f != 0);
+	fputs("G21 G90\nG1 X100 F600\n", f);	/* 10 s: the setpoint queue fills */
+	for (int i = 0; i < 10000; i++)
+		fputs(i & 1 ? "G1 X100\n" : "G1 X100.001\n", f);
+	tail = ftell(f);
+	fputs("G1 X0\nM2\n", f);
+	fclose(f);
+	CHECK_EQ(prog_run(&sd->prog, path, 1000, msg, sizeof(msg)), SE_OK);
+	CHECK_EQ(wait_verdict(sd, msg, sizeof(msg)), 0);
+	/* the file's last move is now malformed */
+	fd = open(path, O_WRONLY);
+	CHECK_EQ(pwrite(fd, "G1 Q0\n", 6, tail), 6);
+	close(fd);
+	memset(cmd, 0, sizeof(cmd));
+	for (long i = 0; i < 5000000 && atomic_load(&sd->prog.mode) != PM_HOLD; i++) {
+		if (atomic_load(&sd->prog.mode) == PM_RUN && !ring_count(&sd->prog.queue) &&
+		    !atomic_load(&sd->prog.feeder_done)) {
+			usleep(100);	/* let the feeder fill the queue */
+			continue;
+		}
+		pthread_mutex_lock(&sd->lock);
+		prog_cycle(&sd->prog, cmd, 3, seq++);
+		pthread_mutex_unlock(&sd->lock);
+	}
+	CHECK_EQ(atomic_load(&sd->prog.result), PR_DONE);
+	CHECK_EQ(sd->prog.play.cur.pos[0], 0);
+	if (atomic_load(&sd->prog.result) != PR_DONE)
+		printf("  run: result %d, error %s\n", atomic_load(&sd->prog.result), sd->prog.info.error);
+	end_feeder(sd);
+	unlink(path);
+	free(sd);
+}
+
 int main(void)
 {
 	test_session();
@@ -525,5 +821,10 @@ int main(void)
 	test_peer_error();
 	test_param_answers_checked();
 	test_cycle_bounds();
+	test_control_peer();
+	test_control_trickle();
+	test_run_fifo_refused();
+	test_run_dry_run_bounded();
+	test_run_checked_text_runs();
 	return check_summary("servod unit");
 }
