@@ -6,7 +6,7 @@
 # (bench/targets.toml). bench/README.md says what each benchmark measures
 # and how long it takes.
 #
-#   scripts/bench.sh                    # all of them (about 7 min, 4 QEMU boots)
+#   scripts/bench.sh                    # all of them (about 6 min, 4 QEMU boots)
 #   scripts/bench.sh transport motion   # some of them
 #   scripts/bench.sh --list             # names, host/board, duration, command
 #   scripts/bench.sh --table            # only the table of bench/results
