@@ -33,6 +33,7 @@ import platform
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "python"))
@@ -127,6 +128,33 @@ def run_info(board: qemu.Board, script: str) -> dict[str, object]:
     }
 
 
+def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
+    """The summary table's figures (bench/README.md); targets in bench/targets.toml."""
+    out: list[dict[str, Any]] = []
+    for mode, m in result["modes"].items():
+        for per, w in m.items():
+            if not isinstance(w, dict) or "linux" not in w:
+                continue
+            lin, srv = w["linux"], w["servo"]
+            k = f"{mode}_{per}"
+            out += [
+                {"name": f"{k}_missed_linux", "value": lin["missed"], "unit": "cycles", "better": "lower",
+                 "note": f"of {lin['cycles'] + lin['missed']} in {w['guest_seconds']} s guest time"},
+                {"name": f"{k}_missed_servo", "value": srv["missed"], "unit": "cycles", "better": "lower",
+                 "note": f"of {srv['cycles'] + srv['missed']}"},
+                {"name": f"{k}_servo_irq_latency_max", "unit": "us", "better": "lower",
+                 "value": round(srv["irq_entry_latency_ns_max_since_start"] / 1000, 2),
+                 "note": "TTC event -> servo handler, since start"},
+                {"name": f"{k}_servod_wake_latency_max", "unit": "us", "better": "lower",
+                 "value": round(lin["wake_latency_ns_since_start"]["max"] / 1000, 2),
+                 "note": f"mean {lin['wake_latency_ns_since_start']['mean'] / 1000:.1f} us"},
+                {"name": f"{k}_servo_handler_max", "unit": "us", "better": "lower",
+                 "value": round(srv["cost_ticks_10ns_since_start"]["cycle"]["max"] / 100, 2),
+                 "note": f"mean {srv['cost_ticks_10ns_since_start']['cycle']['mean'] / 100:.1f} us"},
+            ]
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=10.0)
@@ -162,6 +190,7 @@ def main() -> int:
             print(f"                servod: wake-up latency ns {lin['wake_latency_ns_since_start']}, "
                   f"work (wake->published) ns {lin['work_ns_wake_to_published']}")
             print(f"                servod wake-up histogram (window): {lin['wake_latency_histogram_window']}")
+    result["figures"] = figures(result)
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(result, indent=2) + "\n")
     print(f"written {args.json}")

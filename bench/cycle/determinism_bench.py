@@ -109,6 +109,27 @@ def run_once(board: qemu.Board, images: qemu.Images, cycles: int, period_us: int
     }
 
 
+def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
+    """The summary table's figures (bench/README.md); targets in bench/targets.toml."""
+    runs = result["runs"]
+    kinds = ",".join(r["kind"] for r in runs)
+    out: list[dict[str, Any]] = [
+        {"name": "missed_total", "unit": "cycles", "better": "lower",
+         "value": sum(r["linux_missed_irq"] + r["servo_missed"] for r in runs),
+         "note": f"both sides, runs {kinds}"},
+        {"name": "gaps_total", "unit": "gaps", "better": "lower", "value": sum(r["gaps"] for r in runs),
+         "note": f"{sum(r['cycles_on_record'] for r in runs)} cycles on record"},
+    ]
+    for key, name in (("irq_latency_ns", "irq"), ("wake_latency_ns", "wake")):
+        p99 = [r[key]["p99"] for r in runs]
+        out.append({"name": f"{name}_p99_spread", "unit": "ns", "better": "lower",
+                    "value": max(p99) - min(p99), "note": f"max-min of p99 over runs ({min(p99):.0f} ns)"})
+        mx = [r[key]["max"] for r in runs]
+        out.append({"name": f"{name}_max", "unit": "ns", "better": "lower", "value": max(mx),
+                    "spread": {"min": min(mx), "max": max(mx)}, "note": "over runs"})
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cycles", type=int, default=8000)
@@ -145,6 +166,7 @@ def main() -> int:
         miss = r["linux_missed_irq"] + r["servo_missed"]
         print(f"{str(i) + ' ' + r['kind']:<10} {r['host_seconds']:>7} {miss:>7} " + " ".join(f"{c:>16}" for c in cells))
     print("(guest ns; in brackets: ratio to run 0)")
+    result["figures"] = figures(result)
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(result, indent=2) + "\n")
     print(f"written {args.json}")

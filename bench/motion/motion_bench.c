@@ -518,7 +518,27 @@ int main(int argc, char **argv)
 		}
 		for (unsigned i = 0; i < nfig; i++)
 			json_sched(f, &fig[i], chord_um, workers, reps, i + 1 == nfig);
-		fprintf(f, "}\n");
+		/* the summary table's figures (bench/README.md); targets in
+		 * bench/targets.toml */
+		fprintf(f, ",\n  \"figures\": [\n");
+		for (int kind = 0; kind < 2; kind++)
+			fprintf(f, "    {\"name\": \"blocks_per_s_1thread_%s\", \"value\": %.1f, "
+				"\"unit\": \"1/s\", \"better\": \"higher\", \"note\": \"mixed program, whole pipeline\"},\n",
+				kind ? "scurve" : "trapezoid", single[kind].blocks / single[kind].wall);
+		for (unsigned i = 0; i < nfig; i++) {
+			const char *kind = strcmp(fig[i].key, "scheduler") ? "scurve" : "trapezoid";
+
+			fprintf(f, "    {\"name\": \"speedup_hybrid_%uw_%s\", \"value\": %.4f, "
+				"\"unit\": \"x\", \"better\": \"higher\", \"note\": \"over 1 worker, "
+				"short arcs at %g um\"},\n", workers, kind, fig[i].sp_h, chord_um);
+			fprintf(f, "    {\"name\": \"speedup_hybrid_over_fifo_%uw_%s\", \"value\": %.4f, "
+				"\"unit\": \"x\", \"better\": \"higher\"},\n", workers, kind, fig[i].sp_f);
+			fprintf(f, "    {\"name\": \"calibration_%uthreads_%s\", \"value\": %.4f, "
+				"\"unit\": \"x\", \"better\": \"higher\", \"note\": \"independent threads "
+				"over 1: what the machine offered\"}%s\n", workers, kind, fig[i].calib,
+				i + 1 == nfig ? "" : ",");
+		}
+		fprintf(f, "  ]\n}\n");
 		fclose(f);
 	}
 	free(mixed);

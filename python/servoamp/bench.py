@@ -1,0 +1,348 @@
+# SPDX-License-Identifier: MIT
+"""servoamp's benchmarks behind one entry point, and their summary table.
+
+    scripts/bench.sh [NAME...]          # run (all when no NAME), then the table
+    scripts/bench.sh --list             # what exists, how long each takes
+    scripts/bench.sh --table [NAME...]  # only the table, from bench/results
+    scripts/bench.sh --quick [NAME...]  # tiny configurations into build/bench/quick
+    west bench ...                      # the same
+
+Each benchmark writes bench/results/<name>.json. Every results file carries
+a "figures" list (bench/figures.schema.json); the table shows each figure
+against its target from bench/targets.toml (or the figure's own "target"),
+with the ratio value/target and pass/fail. A results file that no
+benchmark here writes (another tool's) is shown all the same.
+
+Exit status: 1 if a benchmark failed to run or a results file does not
+match the schema; a missed target is reported, not an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+
+REPO = Path(__file__).resolve().parents[2]
+SCHEMA = REPO / "bench" / "figures.schema.json"
+TARGETS = REPO / "bench" / "targets.toml"
+RESULTS = REPO / "bench" / "results"
+QUICK_RESULTS = REPO / "build" / "bench" / "quick"
+LOGS = REPO / "build" / "bench"
+
+
+@dataclass(frozen=True)
+class Bench:
+    name: str
+    what: str
+    board: bool                  # boots the emulated board (QEMU)
+    duration: str                # measured on the project's 2-core host
+    build: tuple[tuple[str, ...], ...]
+    run: tuple[str, ...]         # {python} and {json} are substituted
+    quick: tuple[str, ...]       # extra arguments for --quick
+    needs: str = ""              # a file that must exist (optional benchmarks)
+
+    def command(self, json_path: Path, quick: bool) -> list[str]:
+        args = [a.format(python=sys.executable, json=str(json_path)) for a in self.run]
+        return args + (list(self.quick) if quick else [])
+
+
+BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
+    Bench("transport", "amp_lib exchange vs cache-line floor (alternating blocks), mailbox, eventfd, pipe",
+          False, "1-2 min (eventfd, pipe and the mailbox dominate; 5 min with stress-ng)",
+          (("make", "-s", "-C", "amp_lib", "bench"),),
+          ("build/amp_lib/none/transport_bench", "--iters", "200000", "--blocks", "20", "--json", "{json}"),
+          ("--iters", "2000", "--blocks", "4")),
+    Bench("footprint", "servo-side amp_lib code and data size (arm-none-eabi-gcc -Os)",
+          False, "about 5 s",
+          (),
+          ("{python}", "bench/amp_footprint.py", "--json", "{json}"),
+          ()),
+    Bench("motion", "G-code pipeline: one-thread throughput, hybrid scheduler speed-up on 2 workers",
+          False, "30 s quiet, about 70 s on a busy host",
+          (("make", "-s", "-C", "motion", "-j2", "host"),),
+          ("build/motion/host/motion_bench", "--json", "{json}"),
+          ("--blocks", "300", "--arcs", "200", "--reps", "1", "--chord", "1")),
+    Bench("cycle", "the cycle on the emulated board under virtual time: missed cycles, costs, latencies",
+          True, "about 1 min (one QEMU boot, 10 s + 3 s of guest time)",
+          (),
+          ("{python}", "bench/cycle/cycle_bench.py", "--json", "{json}"),
+          ("--seconds", "1", "--short", "0.5")),
+    Bench("determinism", "the same recorded scenario on a quiet and a loaded host (virtual time)",
+          True, "about 1.5 min (three QEMU boots, 8000 cycles recorded each)",
+          (),
+          ("{python}", "bench/cycle/determinism_bench.py", "--json", "{json}"),
+          ("--cycles", "300", "--runs", "quiet")),
+    Bench("recorder", "recording encodings: bytes/cycle, CPU per 1000 cycles, max rate x axes (issue 15)",
+          False, "not measured yet",
+          (),
+          ("{python}", "bench/recorder/recorder_bench.py", "--json", "{json}"),
+          ("--quick",),
+          needs="bench/recorder/recorder_bench.py"),
+)}
+
+
+# ---- results and targets ------------------------------------------------
+
+@dataclass
+class Target:
+    value: float
+    better: str | None
+    source: str
+
+
+def load_targets(path: Path = TARGETS) -> dict[str, dict[str, Target]]:
+    """bench/targets.toml as {file stem: {figure name or pattern: Target}}."""
+    raw = tomllib.loads(path.read_text())
+    out: dict[str, dict[str, Target]] = {}
+    for stem, figs in raw.items():
+        if not isinstance(figs, dict):
+            raise ValueError(f"{path}: [{stem}] must be a table of figures")
+        for name, t in figs.items():
+            if not isinstance(t, dict) or not isinstance(t.get("target"), (int, float)) \
+                    or not isinstance(t.get("source"), str) or not t["source"].strip() \
+                    or t.get("better", "lower") not in ("lower", "higher") \
+                    or set(t) - {"target", "better", "source"}:
+                raise ValueError(f"{path}: [{stem}.\"{name}\"] needs a numeric target, a source "
+                                 f"and optionally better = lower|higher, nothing else")
+            out.setdefault(stem, {})[name] = Target(float(t["target"]), t.get("better"), t["source"])
+    return out
+
+
+def find_target(targets: dict[str, dict[str, Target]], stem: str, name: str) -> Target | None:
+    figs = targets.get(stem, {})
+    if name in figs:
+        return figs[name]
+    for pattern, t in figs.items():
+        if fnmatch.fnmatchcase(name, pattern):
+            return t
+    return None
+
+
+def validate(doc: Any) -> list[str]:
+    """Schema errors of one results document, plus duplicate names."""
+    schema = json.loads(SCHEMA.read_text())
+    errors = [f"{'/'.join(str(p) for p in e.absolute_path) or '(top)'}: {e.message}"
+              for e in jsonschema.Draft202012Validator(schema).iter_errors(doc)]
+    if not errors:
+        names = [f["name"] for f in doc["figures"]]
+        errors += [f"figures: duplicate name {n!r}" for n in sorted({n for n in names if names.count(n) > 1})]
+        errors += [f"figures/{f['name']}: value is not finite" for f in doc["figures"]
+                   if not math.isfinite(f["value"])]
+    return errors
+
+
+@dataclass
+class Row:
+    bench: str
+    name: str
+    value: float | None
+    unit: str
+    better: str
+    target: float | None
+    source: str | None
+    spread: dict[str, float] | None
+    note: str
+
+    @property
+    def status(self) -> str:
+        if self.value is None:
+            return "error"
+        if self.target is None:
+            return ""
+        ok = self.value <= self.target if self.better == "lower" else self.value >= self.target
+        return "pass" if ok else "FAIL"
+
+    @property
+    def ratio(self) -> float | None:
+        if self.value is None or self.target is None or self.target == 0:
+            return None
+        return self.value / self.target
+
+
+def rows_of(stem: str, path: Path, targets: dict[str, dict[str, Target]]) -> list[Row]:
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        return [Row(stem, "(unreadable)", None, "", "lower", None, None, None, str(e))]
+    errors = validate(doc)
+    if errors:
+        return [Row(stem, "(schema)", None, "", "lower", None, None, None, e) for e in errors]
+    rows = []
+    for f in doc["figures"]:
+        t = find_target(targets, stem, f["name"])
+        rows.append(Row(stem, f["name"], float(f["value"]), f["unit"],
+                        (t.better if t and t.better else f["better"]),
+                        t.value if t else f.get("target"),
+                        t.source if t else f.get("target_source", "results file" if "target" in f else None),
+                        f.get("spread"), f.get("note", "")))
+    return rows
+
+
+def fmt(v: float | None) -> str:
+    if v is None:
+        return "-"
+    if v == int(v) and abs(v) < 1e15:
+        return f"{int(v):,}" if abs(v) >= 10000 else str(int(v))
+    a = abs(v)
+    if a >= 10000:
+        return f"{v:,.0f}"
+    if a >= 100:
+        return f"{v:.0f}"
+    if a >= 10:
+        return f"{v:.1f}"
+    if a >= 1:
+        return f"{v:.2f}"
+    return f"{v:.3g}"
+
+
+def table(rows: list[Row]) -> str:
+    sources: list[str] = []
+    lines = []
+    head = ("bench", "figure", "value", "unit", "target", "ratio", "status", "spread / note")
+    cells = []
+    for r in rows:
+        tgt = "-"
+        if r.target is not None:
+            if r.source not in sources:
+                sources.append(r.source or "")
+            tgt = f"{'<=' if r.better == 'lower' else '>='} {fmt(r.target)} [{sources.index(r.source or '') + 1}]"
+        spread = ""
+        if r.spread:
+            lo, hi = r.spread.get("min"), r.spread.get("max")
+            q1, q3 = r.spread.get("q1"), r.spread.get("q3")
+            parts = []
+            if q1 is not None and q3 is not None:
+                parts.append(f"IQR {fmt(q1)}-{fmt(q3)}")
+            if lo is not None and hi is not None:
+                parts.append(f"min-max {fmt(lo)}-{fmt(hi)}")
+            spread = ", ".join(parts)
+        note = "; ".join(p for p in (spread, r.note) if p)
+        cells.append((r.bench, r.name, fmt(r.value), r.unit, tgt,
+                      "-" if r.ratio is None else f"{r.ratio:.2f}", r.status, note))
+    widths = [max(len(c[i]) for c in [head, *cells]) for i in range(len(head) - 1)]
+    for c in [head, *cells]:
+        lines.append("  ".join(s.ljust(w) if i in (0, 1, 3, 4, 6) else s.rjust(w)
+                               for i, (s, w) in enumerate(zip(c[:-1], widths))) + "  " + c[-1])
+    lines.insert(1, "-" * max(len(l) for l in lines))
+    met = sum(r.status == "pass" for r in rows)
+    failed = sum(r.status == "FAIL" for r in rows)
+    lines.append("")
+    lines.append(f"{met} of {met + failed} targets met" +
+                 (f", {sum(r.status == 'error' for r in rows)} errors" if any(r.status == "error" for r in rows)
+                  else ""))
+    for i, s in enumerate(sources, 1):
+        lines.append(f"[{i}] {s}")
+    return "\n".join(lines)
+
+
+def result_files(results: Path, names: list[str]) -> list[tuple[str, Path]]:
+    if names:
+        return [(n, results / f"{n}.json") for n in names if (results / f"{n}.json").exists()]
+    found = {p.stem: p for p in sorted(results.glob("*.json"))}
+    order = [n for n in BENCHMARKS if n in found] + [n for n in found if n not in BENCHMARKS]
+    return [(n, found[n]) for n in order]
+
+
+# ---- running ----------------------------------------------------------------
+
+def run_bench(b: Bench, results: Path, quick: bool, verbose: bool) -> tuple[bool, str]:
+    if b.needs and not (REPO / b.needs).exists():
+        return True, f"skipped: {b.needs} does not exist yet"
+    LOGS.mkdir(parents=True, exist_ok=True)
+    log = LOGS / f"{b.name}{'-quick' if quick else ''}.log"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO / "python"), env.get("PYTHONPATH", "")) if p)
+    results.mkdir(parents=True, exist_ok=True)
+    out = results / f"{b.name}.json"
+    t0 = time.monotonic()
+    with log.open("w") as lf:
+        for cmd in (*b.build, tuple(b.command(out, quick))):
+            lf.write(f"$ {' '.join(cmd)}\n")
+            lf.flush()
+            if verbose:
+                print(f"[bench] $ {' '.join(cmd)}", flush=True)
+                p = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True)
+                assert p.stdout is not None
+                for line in p.stdout:
+                    sys.stdout.write(line)
+                    lf.write(line)
+                rc = p.wait()
+            else:
+                rc = subprocess.call(cmd, cwd=REPO, env=env, stdout=lf, stderr=subprocess.STDOUT)
+            if rc:
+                return False, f"failed (exit {rc}) after {time.monotonic() - t0:.0f} s: see {log}"
+    return True, f"{time.monotonic() - t0:.0f} s, wrote {out.relative_to(REPO) if out.is_relative_to(REPO) else out}"
+
+
+def needs_board(names: list[str]) -> bool:
+    return any(BENCHMARKS[n].board for n in (names or list(BENCHMARKS)) if n in BENCHMARKS)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="bench", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all); see --list")
+    ap.add_argument("--list", action="store_true", help="list the benchmarks and exit")
+    ap.add_argument("--table", action="store_true", help="run nothing: the table of the results there are")
+    ap.add_argument("--quick", action="store_true",
+                    help="tiny configurations (a smoke run; figures meaningless) into build/bench/quick")
+    ap.add_argument("--results", type=Path, help="results directory (default: bench/results, "
+                                                  "build/bench/quick with --quick)")
+    ap.add_argument("-v", "--verbose", action="store_true", help="show the benchmarks' own output")
+    ap.add_argument("--scope", action="store_true", help=argparse.SUPPRESS)  # for scripts/bench.sh
+    args = ap.parse_args(argv)
+
+    if args.scope:  # which bootstrap the selection needs
+        print("all" if not (args.list or args.table) and needs_board(args.names) else "host")
+        return 0
+    if args.list:
+        for b in BENCHMARKS.values():
+            state = "" if not b.needs or (REPO / b.needs).exists() else f" (not present: {b.needs})"
+            print(f"{b.name:<12} {'board' if b.board else 'host':<5} {b.duration}{state}\n"
+                  f"{'':<12} {b.what}\n{'':<12} $ {' '.join(b.run)}")
+        return 0
+    results = args.results or (QUICK_RESULTS if args.quick else RESULTS)
+    results = results if results.is_absolute() else Path.cwd() / results
+    unknown = [n for n in args.names if n not in BENCHMARKS and not (results / f"{n}.json").exists()]
+    if unknown:
+        ap.error(f"unknown benchmark {', '.join(unknown)} (known: {', '.join(BENCHMARKS)})")
+    rc = 0
+    if not args.table:
+        for n in args.names or list(BENCHMARKS):
+            if n not in BENCHMARKS:
+                print(f"[bench] {n}: no runner here; showing {results / (n + '.json')}")
+                continue
+            b = BENCHMARKS[n]
+            print(f"[bench] {n}: running ({b.duration}{', boots QEMU' if b.board else ''})", flush=True)
+            ok, msg = run_bench(b, results, args.quick, args.verbose)
+            print(f"[bench] {n}: {msg}", flush=True)
+            rc |= 0 if ok else 1
+    try:
+        targets = load_targets()
+    except (OSError, ValueError) as e:
+        print(f"[bench] {e}", file=sys.stderr)
+        return 1
+    rows = [r for stem, path in result_files(results, args.names) for r in rows_of(stem, path, targets)]
+    print()
+    print(f"results: {results}" + ("  (--quick: smoke-run sizes, the figures mean nothing)" if args.quick else ""))
+    print(table(rows))
+    if any(r.status == "error" for r in rows):
+        rc = 1
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())
