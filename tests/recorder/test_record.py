@@ -289,7 +289,7 @@ def test_layout_matches_generator_and_topics(rec: dict[str, Any], tmp_path: Path
 def test_mypy_strict() -> None:
     mods = [str(TOP / "python" / "servoamp" / f"{m}.py")
             for m in ("telemetry", "mcapio", "record", "info", "plot", "cli", "netboard",
-                      "demo_record")]
+                      "demo_record", "bridge", "pbenc")]
     p = subprocess.run([str(Path(sys.executable).parent / "mypy"), "--strict", *mods],
                        capture_output=True, text=True, timeout=300, cwd=TOP)
     assert p.returncode == 0, p.stdout + p.stderr
