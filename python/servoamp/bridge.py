@@ -128,18 +128,6 @@ class Bridge:
                        schema=Schema(name=f"servoamp.{m}", encoding="protobuf", data=self.fds))
             for t, m in CHANNELS.items()}
         self.ch_log = LogChannel(T_LOG, context=self.ctx)
-        self.mcap = None
-        if mcap is not None:
-            self.mcap = foxglove.open_mcap(
-                str(mcap), allow_overwrite=True, context=self.ctx,
-                writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd,
-                                                chunk_size=1 << 20))
-        self.server = None
-        if serve:
-            self.server = foxglove.start_server(
-                name="servoamp", host=ws_host, port=ws_port, context=self.ctx,
-                capabilities=[Capability.Parameters], server_listener=_Listener(self),
-                message_backlog_size=message_backlog)
         # telemetry state
         self.sock: socket.socket | None = None
         self.send_lock = threading.Lock()
@@ -157,6 +145,18 @@ class Bridge:
         self.final_seen = False
         self.meta_written = False
         self.params: dict[str, ParamInfo] = {}
+        self.server = None  # a taken port raises before any file is opened
+        if serve:
+            self.server = foxglove.start_server(
+                name="servoamp", host=ws_host, port=ws_port, context=self.ctx,
+                capabilities=[Capability.Parameters], server_listener=_Listener(self),
+                message_backlog_size=message_backlog)
+        self.mcap = None
+        if mcap is not None:
+            self.mcap = foxglove.open_mcap(
+                str(mcap), allow_overwrite=True, context=self.ctx,
+                writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd,
+                                                chunk_size=1 << 20))
 
     # -- the app's side ----------------------------------------------------------------
     @property

@@ -212,3 +212,45 @@ def test_non_request_frames_close_the_client(feed_bin: Path) -> None:
     finally:
         feed.kill()
     assert res["protocol"] == 2
+
+
+def _resolves(msg: Any, path: str) -> bool:
+    """A Foxglove message path (fields, [i], map keys) against a protobuf descriptor."""
+    d = msg
+    for part in path.split("."):
+        name, _, idx = part.partition("[")
+        if d is None:
+            return True  # below a map: any key
+        f = d.fields_by_name.get(name)
+        if f is None:
+            return False
+        if f.message_type is not None and f.message_type.GetOptions().map_entry:
+            d = None
+        else:
+            if bool(idx) != f.is_repeated:
+                return False
+            d = f.message_type
+    return True
+
+
+def test_layout_matches_generator_and_the_bridge_channels(tmp_path: Path) -> None:
+    """tools/foxglove/servoamp-layout.json is make_layout.py's output, and
+    every path in it is a channel the bridge serves with a field its schema has."""
+    layout = TOP / "tools" / "foxglove" / "servoamp-layout.json"
+    gen = tmp_path / "layout.json"
+    subprocess.run([sys.executable, str(TOP / "tools" / "foxglove" / "make_layout.py"), "-o",
+                    str(gen)], check=True)
+    assert json.loads(layout.read_text()) == json.loads(gen.read_text())
+    refs: list[str] = []
+    for cfg in json.loads(layout.read_text())["configById"].values():
+        refs += [p["value"] for p in cfg.get("paths", [])]
+        if "xAxisPath" in cfg:
+            refs.append(cfg["xAxisPath"]["value"])
+        refs += [cfg[k] for k in ("topicToRender", "topicPath") if k in cfg]
+    assert refs
+    for r in refs:
+        topic, _, path = r.partition(".")
+        assert topic in bridge.TOPICS, r
+        if path and topic in bridge.CHANNELS:
+            desc = pb.DESCRIPTOR.message_types_by_name[bridge.CHANNELS[topic]]
+            assert _resolves(desc, path), r
