@@ -64,6 +64,18 @@ _LEVELS = {0: LogLevel.Unknown, 1: LogLevel.Debug, 2: LogLevel.Info, 3: LogLevel
            4: LogLevel.Error, 5: LogLevel.Fatal}
 
 
+def is_loopback(host: str) -> bool:
+    """127.0.0.0/8, ::1 or localhost."""
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
 class ParamError(Exception):
     """servod refused a parameter request (its message)."""
 
@@ -112,6 +124,7 @@ class Bridge:
                  mcap: str | Path | None = None, reconnect: bool = True,
                  connect_timeout: float = 10.0, max_backoff: float = 2.0,
                  request_timeout: float = 10.0, message_backlog: int = 1 << 16,
+                 params: bool = True,
                  on_progress: Callable[[RecordResult], None] | None = None) -> None:
         self.host, self.port = host, port
         self.auth = tw.encode_auth(token)
@@ -145,11 +158,18 @@ class Bridge:
         self.final_seen = False
         self.meta_written = False
         self.params: dict[str, ParamInfo] = {}
+        self.params_on = params
         self.server = None  # a taken port raises before any file is opened
         if serve:
+            if not is_loopback(ws_host):
+                raise ValueError(f"{ws_host} is not a loopback address: the WebSocket server "
+                                 "has no access control, and whoever reaches it can set the "
+                                 "controller's parameters with this bridge's token (use an SSH "
+                                 "tunnel for another machine)")
             self.server = foxglove.start_server(
                 name="servoamp", host=ws_host, port=ws_port, context=self.ctx,
-                capabilities=[Capability.Parameters], server_listener=_Listener(self),
+                capabilities=[Capability.Parameters] if params else [],
+                server_listener=_Listener(self) if params else None,
                 message_backlog_size=message_backlog)
         self.mcap = None
         if mcap is not None:
@@ -360,7 +380,7 @@ class Bridge:
                 info = self.params.get(q.name)
                 if info is not None:
                     info.value = q.value if info.type == "f32" else int(q.value)
-                if self.server is not None:
+                if self.server is not None and self.params_on:
                     self.server.publish_parameter_values([fox_param(q.name, q.type, q.value)])
             elif typ == tw.MSG_LOG:
                 lg = tw.decode_log(p)

@@ -95,8 +95,8 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
     try:
         b = Bridge(host, port, token=token, ws_host=ws_host, ws_port=ws_port,
                    serve=not args.no_server, mcap=args.mcap, reconnect=not args.no_reconnect,
-                   connect_timeout=args.connect_timeout)
-    except (OSError, RuntimeError) as e:
+                   connect_timeout=args.connect_timeout, params=not args.no_params)
+    except (OSError, RuntimeError, ValueError) as e:
         print(f"servoamp bridge: {e}", file=sys.stderr)
         return 4
     url = f"ws://{ws_host}:{b.server.port}" if b.server is not None else None
@@ -159,6 +159,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="the Foxglove WebSocket server's address (default 127.0.0.1:8765; "
                         "port 0: any free port)")
     p.add_argument("--no-server", action="store_true", help="MCAP only, no WebSocket server")
+    p.add_argument("--no-params", action="store_true",
+                   help="do not offer the parameters capability (whoever reaches the "
+                        "WebSocket port could otherwise set parameters with this token)")
     p.add_argument("--mcap", metavar="FILE.mcap", help="also write the channels to FILE")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")

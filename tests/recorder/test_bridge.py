@@ -254,3 +254,17 @@ def test_layout_matches_generator_and_the_bridge_channels(tmp_path: Path) -> Non
         if path and topic in bridge.CHANNELS:
             desc = pb.DESCRIPTOR.message_types_by_name[bridge.CHANNELS[topic]]
             assert _resolves(desc, path), r
+
+
+def test_websocket_server_on_loopback_only(tmp_path: Path) -> None:
+    """Whoever reaches the WebSocket port acts with the bridge's token: an
+    address other than loopback is refused before anything is opened."""
+    for host in ("0.0.0.0", "10.0.2.2", "::"):
+        with pytest.raises(ValueError, match="not a loopback address"):
+            bridge.Bridge("127.0.0.1", 1, ws_host=host, ws_port=0, mcap=tmp_path / "x.mcap")
+    assert not (tmp_path / "x.mcap").exists()
+    assert all(bridge.is_loopback(h) for h in ("127.0.0.1", "127.1.2.3", "::1", "localhost"))
+    p = subprocess.run(servoamp_cmd("bridge", "--connect", "127.0.0.1:1", "--listen",
+                                    "0.0.0.0:0", "--duration", "1"),
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 4 and "not a loopback address" in p.stderr
