@@ -268,3 +268,35 @@ def test_websocket_server_on_loopback_only(tmp_path: Path) -> None:
                                     "0.0.0.0:0", "--duration", "1"),
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 4 and "not a loopback address" in p.stderr
+
+
+def test_cli_sigint_leaves_a_finalized_file(feed_bin: Path, tmp_path: Path) -> None:
+    """`servoamp bridge` stopped with SIGINT: the MCAP file is finished
+    (summary, footer) and has the cycles bridged so far."""
+    import signal
+    import time
+
+    out = tmp_path / "run.mcap"
+    feed = Feed(feed_bin, "--cycles", "60000", "--axes", "2", "--wait-clients", "1")
+    proc = subprocess.Popen(servoamp_cmd("bridge", "--connect", f"127.0.0.1:{feed.port}",
+                                         "--listen", "127.0.0.1:0", "--mcap", str(out),
+                                         "--json"),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first.startswith("servoamp bridge: Foxglove WebSocket on ws://127.0.0.1:"), first
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and (not out.exists() or out.stat().st_size < 20000):
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGINT)
+        rest, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        feed.kill()
+    assert proc.returncode == 0, err
+    res = json.loads(rest.strip().splitlines()[-1])
+    assert res["stopped_by"] == "signal" and res["cycles"] > 0
+    s = info.summarize(out)
+    assert s["complete"] and s["cycles"] == res["cycles"]
