@@ -5,8 +5,10 @@
 # firmware through the remoteproc sysfs, show the cycle running (trace log,
 # ampctl status/stats, parameters, a hang and its recovery), stop it and
 # shut down cleanly; then run the squares-and-circles G-code program
-# through the motion pipeline while recording every cycle into an MCAP file
-# with plots (build/demo/run.mcap, build/demo/plots/).
+# through the motion pipeline while streaming every cycle through
+# `servoamp bridge`: live on the ws:// address it prints (Foxglove: Open
+# connection > Foxglove WebSocket) and into an MCAP file through the Foxglove
+# SDK, with plots (build/demo/run.mcap, build/demo/plots/).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"

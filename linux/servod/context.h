@@ -116,6 +116,7 @@ void telemetry_start(struct servod *sd);
 void telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, const struct amp_rx_info *rx,
 		     const struct amp_cmd_axis *cmd, uint32_t n);
 void telemetry_attach(struct servod *sd, int recovery, uint64_t stall_cycle, uint64_t cycle);
+void telemetry_serve(struct servod *sd);	/* REQUEST frames: "param ..." (main thread) */
 void telemetry_stop(struct servod *sd);
 
 #endif

@@ -235,6 +235,7 @@ int main(int argc, char **argv)
 	while (!servod_quitting(sd)) {
 		supervise(sd);
 		control_serve(sd, 20);
+		telemetry_serve(sd);
 	}
 	logm(sd, "exiting: closing the link (the servo brings its axes to a safe stop)");
 	pthread_join(th, 0);	/* the cycle thread sees quit within 100 ms */

@@ -121,6 +121,9 @@ void telemetry_start(struct servod *sd)
 	tc.mlock = 1;
 	tc.app_counters = cycle_stats_counters;
 	tc.app_arg = &sd->pub;
+	/* "param" requests (telemetry_serve) only from clients that presented
+	 * the token: without one, any local process could connect */
+	tc.requests = sd->opt.telem_token_len ? 1 : 0;
 	tc.token = sd->opt.telem_token_len ? sd->opt.telem_token : NULL;
 	tc.token_len = sd->opt.telem_token_len;
 	rc = telem_init(&sd->telem, &tc);
@@ -179,6 +182,45 @@ void telemetry_attach(struct servod *sd, int recovery, uint64_t stall_cycle, uin
 	for (int i = 0; i < SP_P_COUNT; i++)
 		if (param_desc[i].flags & SP_F_RESTORE)
 			params_publish(sd, (uint32_t)i, sd->pset[i]);
+}
+
+/* The handlers' declarations (SERVOD_REQUEST, control.c). */
+extern const struct servod_request __start_servod_requests[];
+extern const struct servod_request __stop_servod_requests[];
+
+/*
+ * REQUEST frames of authenticated telemetry clients (docs/telemetry.md
+ * "Requests"): "param list | get NAME | set NAME VALUE", run by the same
+ * handler as ampctl's (range checks, the servo's answer checked, the file,
+ * the PARAM event); anything else is refused. Main thread, like the
+ * control socket.
+ */
+void telemetry_serve(struct servod *sd)
+{
+	struct telem_request r;
+
+	if (!sd->telem_on)
+		return;
+	while (telem_pop_request(&sd->telem, &r)) {
+		char msg[512] = "", *argv[8], *save = 0, *tok;
+		struct out o = { malloc(1024), 0, 1024 };
+		int argc = 0, rc = SE_USAGE;
+
+		if (!o.buf)
+			return;
+		for (tok = strtok_r(r.text, " \t\r\n", &save); tok && argc < 8; tok = strtok_r(0, " \t\r\n", &save))
+			argv[argc++] = tok;
+		snprintf(msg, sizeof(msg), "only \"param list | get NAME | set NAME VALUE\" is served here");
+		if (argc && !strcmp(argv[0], "param"))
+			for (const struct servod_request *q = __start_servod_requests; q < __stop_servod_requests; q++)
+				if (!strcmp(q->name, "param"))
+					rc = q->fn(sd, &o, argc, argv, msg, sizeof(msg));
+		if (rc == SE_OK)
+			telem_reply(&sd->telem, &r, 0, o.buf, o.len);
+		else
+			telem_reply(&sd->telem, &r, rc, msg, strlen(msg));
+		free(o.buf);
+	}
 }
 
 void telemetry_stop(struct servod *sd)

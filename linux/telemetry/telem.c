@@ -58,6 +58,16 @@ struct telem_event {
 	unsigned char data[EVENT_MAX];
 };
 
+/* A reply waiting for the drain thread (telem_reply). */
+#define REPLY_HDR 12u
+#define REQ_QUEUE (TELEM_MAX_CLIENTS * TELEM_REQ_PER_CLIENT)
+struct telem_reply {
+	uint32_t slot;
+	uint64_t conn;
+	uint32_t len;
+	unsigned char data[FRAME_HDR + REPLY_HDR + TELEM_REPLY_MAX];
+};
+
 struct telem_client {
 	int fd;
 	unsigned char *buf;
@@ -68,17 +78,16 @@ struct telem_client {
 	int authed;			/* AUTH accepted: the client gets the stream */
 	uint64_t t_conn;		/* accepted at (CLOCK_MONOTONIC ns) */
 	uint64_t t_progress;		/* last time its socket took bytes, or its buffer was empty */
-	uint32_t in_len;		/* bytes of the AUTH frame received so far */
-	uint32_t rx_after;		/* bytes received after the AUTH frame */
-	unsigned char in[8 + TELEM_TOKEN_MAX];
+	uint32_t in_len;		/* bytes of the frame (AUTH, then REQUEST) received so far */
+	uint64_t conn;			/* connection serial (replies find their client) */
+	uint32_t in_flight;		/* its requests not answered yet */
+	unsigned char in[8 + 4 + TELEM_REQ_MAX];
 };
 
-/* What one client may send: one AUTH frame, then nothing. client_read takes
- * at most CLIENT_READ_MAX bytes per pass (a flooding client cannot keep the
- * drain thread in recv), and closes a client that sent more than
- * CLIENT_AFTER_MAX bytes after its AUTH. */
+/* What one client may send: one AUTH frame, then REQUEST frames only (any
+ * other frame closes it). client_read takes at most CLIENT_READ_MAX bytes
+ * per pass (a flooding client cannot keep the drain thread in recv). */
 #define CLIENT_READ_MAX 4096u
-#define CLIENT_AFTER_MAX 4096u
 
 /* ---- little-endian encoding ---- */
 static unsigned char *put16(unsigned char *p, uint16_t v) { memcpy(p, &v, 2); return p + 2; }
@@ -219,9 +228,11 @@ int telem_init(struct telem *t, const struct telem_cfg *cfg)
 	ring_rc = ring_init(&t->ring, sizeof(struct telem_slot), cfg->ring_capacity);
 	t->ev = calloc(cfg->event_capacity, sizeof(struct telem_event));
 	t->clients = calloc(TELEM_MAX_CLIENTS, sizeof(struct telem_client));
+	t->req = calloc(REQ_QUEUE, sizeof(struct telem_request));
+	t->rep = calloc(REQ_QUEUE, sizeof(struct telem_reply));
 	t->scratch_cap = FRAME_HDR + CYCLE_HDR_LEN + AXIS_LEN * AMP_MAX_AXES + EVENT_MAX;
 	t->scratch = malloc(t->scratch_cap);
-	if (ring_rc || !t->ev || !t->clients || !t->scratch) {
+	if (ring_rc || !t->ev || !t->clients || !t->scratch || !t->req || !t->rep) {
 		rc = -ENOMEM;
 		goto fail;
 	}
@@ -253,6 +264,10 @@ fail:
 	free(t->ev);
 	free(t->clients);
 	free(t->scratch);
+	free(t->req);
+	free(t->rep);
+	t->req = NULL;
+	t->rep = NULL;
 	t->ev = NULL;
 	t->clients = NULL;
 	t->scratch = NULL;
@@ -599,9 +614,9 @@ static void accept_clients(struct telem *t)
 		c->off = c->len = 0;
 		c->lost = c->lost_total = c->events_lost = 0;
 		c->authed = 0;
-		c->in_len = c->rx_after = 0;
+		c->in_len = c->in_flight = 0;
 		c->t_conn = c->t_progress = mono_now_ns();
-		atomic_fetch_add_explicit(&t->clients_total, 1u, memory_order_relaxed);
+		c->conn = atomic_fetch_add_explicit(&t->clients_total, 1u, memory_order_relaxed) + 1u;
 	}
 }
 
@@ -643,32 +658,92 @@ static void client_authed(struct telem *t, struct telem_client *c)
 	unsigned char hello[FRAME_HDR + HELLO_LEN];
 
 	c->authed = 1;
+	c->in_len = 0;
 	c->t_progress = mono_now_ns();
 	atomic_fetch_add_explicit(&t->clients_now, 1u, memory_order_relaxed);
 	client_append(c, hello, enc_hello(t, hello));
 }
 
-/* At most CLIENT_READ_MAX bytes per call: the AUTH frame (exactly its bytes,
- * so that nothing after it is mistaken for it), then anything else is
- * discarded and counted against CLIENT_AFTER_MAX. */
+/* The REQUEST frame so far in c->in: 1 complete, 0 incomplete, -1 not a
+ * REQUEST (type, flags, or a length outside 4..4 + TELEM_REQ_MAX). */
+static int request_check(const struct telem_client *c)
+{
+	uint16_t type, flags;
+	uint32_t len;
+
+	if (c->in_len < FRAME_HDR)
+		return 0;
+	memcpy(&type, c->in, 2);
+	memcpy(&flags, c->in + 2, 2);
+	memcpy(&len, c->in + 4, 4);
+	if (type != TELEM_MSG_REQUEST || flags || len < 4u || len > 4u + TELEM_REQ_MAX)
+		return -1;
+	return c->in_len >= FRAME_HDR + len;
+}
+
+static size_t enc_reply(unsigned char *b, uint32_t id, int32_t status, const char *text, size_t len)
+{
+	unsigned char *p = b;
+
+	if (len > TELEM_REPLY_MAX)
+		len = TELEM_REPLY_MAX;
+	p = frame(p, TELEM_MSG_REPLY, REPLY_HDR + (uint32_t)len);
+	p = put32(p, id);
+	p = puti32(p, status);
+	p = put32(p, (uint32_t)len);
+	memcpy(p, text, len);
+	return (size_t)(p - b) + len;
+}
+
+/* A complete REQUEST in c->in: queued for the application, or answered at
+ * once (busy, or no request service). */
+static void request_take(struct telem *t, struct telem_client *c)
+{
+	uint32_t id, len;
+	struct telem_request *r;
+
+	memcpy(&len, c->in + 4, 4);
+	memcpy(&id, c->in + FRAME_HDR, 4);
+	len -= 4u;
+	pthread_mutex_lock(&t->ev_lock);
+	if (t->cfg.requests && c->in_flight < TELEM_REQ_PER_CLIENT && t->req_head - t->req_tail < REQ_QUEUE) {
+		r = &t->req[t->req_head % REQ_QUEUE];
+		r->slot = (uint32_t)(c - t->clients);
+		r->conn = c->conn;
+		r->id = id;
+		r->len = len;
+		memcpy(r->text, c->in + FRAME_HDR + 4u, len);
+		r->text[len] = 0;
+		t->req_head++;
+		c->in_flight++;
+		pthread_mutex_unlock(&t->ev_lock);
+	} else {
+		unsigned char b[FRAME_HDR + REPLY_HDR + 64];
+		const char *why = t->cfg.requests ? "busy: too many requests in flight" : "no requests served";
+
+		pthread_mutex_unlock(&t->ev_lock);
+		client_put(t, c, b, enc_reply(b, id, t->cfg.requests ? TELEM_REPLY_BUSY : TELEM_REPLY_UNSERVED,
+					      why, strlen(why)), NULL, mono_now_ns());
+	}
+}
+
+/* At most CLIENT_READ_MAX bytes per call, one frame at a time and exactly
+ * its bytes: the AUTH frame, then REQUEST frames; anything else closes the
+ * client. */
 static void client_read(struct telem *t, struct telem_client *c)
 {
-	unsigned char sink[512];
 	size_t budget = CLIENT_READ_MAX;
 
 	while (c->fd >= 0 && budget) {
-		unsigned char *dst = sink;
-		size_t want = sizeof(sink) < budget ? sizeof(sink) : budget;
+		uint32_t len = 0;
+		unsigned char *dst = c->in + c->in_len;
+		size_t want;
 		ssize_t n;
 
-		if (!c->authed) {
-			uint32_t len = 0;
-
-			if (c->in_len >= FRAME_HDR)
-				memcpy(&len, c->in + 4, 4);
-			dst = c->in + c->in_len;
-			want = (c->in_len < FRAME_HDR ? FRAME_HDR : FRAME_HDR + len) - c->in_len;
-		}
+		/* the header's length was checked when the header completed */
+		if (c->in_len >= FRAME_HDR)
+			memcpy(&len, c->in + 4, 4);
+		want = (c->in_len < FRAME_HDR ? FRAME_HDR : FRAME_HDR + len) - c->in_len;
 		n = recv(c->fd, dst, want, MSG_DONTWAIT);
 		if (n < 0 && errno == EINTR)
 			continue;
@@ -679,20 +754,27 @@ static void client_read(struct telem *t, struct telem_client *c)
 		if (n < 0)
 			return;		/* nothing more for now */
 		budget -= (size_t)n;
+		c->in_len += (uint32_t)n;
 		if (!c->authed) {
-			int ok;
+			int ok = auth_check(t, c);
 
-			c->in_len += (uint32_t)n;
-			ok = auth_check(t, c);
 			if (ok < 0)
 				client_drop(t, c, &t->drop_auth_failed);
 			else if (ok > 0)
 				client_authed(t, c);
 			continue;
 		}
-		c->rx_after += (uint32_t)n;
-		if (c->rx_after > CLIENT_AFTER_MAX)
+		switch (request_check(c)) {
+		case -1:
 			client_drop(t, c, &t->drop_protocol);
+			break;
+		case 1:
+			request_take(t, c);
+			c->in_len = 0;
+			break;
+		default:
+			break;
+		}
 	}
 }
 
@@ -825,6 +907,62 @@ static void drain_events(struct telem *t)
 	}
 }
 
+/* Replies (telem_reply) to the clients that asked, if still connected. */
+static void drain_replies(struct telem *t)
+{
+	pthread_mutex_lock(&t->ev_lock);
+	while (t->rep_tail != t->rep_head) {
+		struct telem_reply *r = &t->rep[t->rep_tail % REQ_QUEUE];
+		struct telem_client *c = &t->clients[r->slot];
+
+		if (c->fd >= 0 && c->conn == r->conn) {
+			if (c->in_flight)
+				c->in_flight--;
+			client_put(t, c, r->data, r->len, NULL, mono_now_ns());
+		}
+		t->rep_tail++;
+	}
+	pthread_mutex_unlock(&t->ev_lock);
+}
+
+int telem_pop_request(struct telem *t, struct telem_request *r)
+{
+	int got = 0;
+
+	pthread_mutex_lock(&t->ev_lock);
+	if (t->req_tail != t->req_head) {
+		*r = t->req[t->req_tail % REQ_QUEUE];
+		t->req_tail++;
+		got = 1;
+	}
+	pthread_mutex_unlock(&t->ev_lock);
+	return got;
+}
+
+int telem_reply(struct telem *t, const struct telem_request *r, int32_t status, const char *text, size_t len)
+{
+	struct telem_reply *e;
+	char one = 1;
+
+	if (r->slot >= TELEM_MAX_CLIENTS)
+		return -1;
+	pthread_mutex_lock(&t->ev_lock);
+	if (t->rep_head - t->rep_tail >= REQ_QUEUE) {
+		pthread_mutex_unlock(&t->ev_lock);
+		return -1;
+	}
+	e = &t->rep[t->rep_head % REQ_QUEUE];
+	e->slot = r->slot;
+	e->conn = r->conn;
+	e->len = (uint32_t)enc_reply(e->data, r->id, status, text ? text : "", text ? len : 0u);
+	t->rep_head++;
+	pthread_mutex_unlock(&t->ev_lock);
+	if (write(t->wake_fd[1], &one, 1) < 0) {
+		/* the pipe is full: the drain thread is awake anyway */
+	}
+	return 0;
+}
+
 static void send_stats(struct telem *t, uint32_t flags)
 {
 	struct telem_counter ctr[TELEM_MAX_COUNTERS];
@@ -936,6 +1074,7 @@ static void *drain_main(void *arg)
 		client_deadlines(t, mono_now_ns());
 		drain_ring(t);
 		drain_events(t);
+		drain_replies(t);
 		if (t->cfg.stats_interval_ms && mono_now_ns() >= next_stats) {
 			send_stats(t, 0);
 			next_stats += (uint64_t)t->cfg.stats_interval_ms * 1000000ull;
@@ -1031,6 +1170,8 @@ void telem_destroy(struct telem *t)
 	free(t->ev);
 	free(t->clients);
 	free(t->scratch);
+	free(t->req);
+	free(t->rep);
 	memset(t, 0, sizeof(*t));
 	t->listen_fd = -1;
 	t->wake_fd[0] = t->wake_fd[1] = -1;

@@ -59,7 +59,26 @@ enum telem_msg_type {
 	TELEM_MSG_LOG = 5,
 	TELEM_MSG_GAP = 6,
 	TELEM_MSG_QUEUES = 7,
-	TELEM_MSG_AUTH = 8,	/* client -> server, the first and only client frame */
+	TELEM_MSG_AUTH = 8,	/* client -> server, the first client frame */
+	TELEM_MSG_REQUEST = 9,	/* client -> server after AUTH: u32 id, text (cfg.requests) */
+	TELEM_MSG_REPLY = 10,	/* server -> the client that asked: u32 id, i32 status, u32 n, text */
+};
+
+/* Requests (docs/telemetry.md "Requests"): an authenticated client may send
+ * REQUEST frames; the application takes them with telem_pop_request (any
+ * thread) and answers with telem_reply. */
+#define TELEM_REQ_MAX 256u		/* request text bytes */
+#define TELEM_REPLY_MAX 4000u		/* reply text bytes */
+#define TELEM_REQ_PER_CLIENT 2u		/* requests of one client in flight */
+#define TELEM_REPLY_BUSY (-1)		/* status: too many requests in flight */
+#define TELEM_REPLY_UNSERVED (-2)	/* status: this server takes no requests */
+
+struct telem_request {
+	uint32_t slot;			/* the client (opaque to the application) */
+	uint64_t conn;
+	uint32_t id;			/* the client's request id, echoed in the reply */
+	uint32_t len;			/* text bytes */
+	char text[TELEM_REQ_MAX + 1];	/* NUL-terminated (a NUL inside ends it early) */
 };
 
 /* Exchange status of a cycle: the same values as amp_lib's enum amp_rx_status. */
@@ -154,6 +173,7 @@ struct telem_cfg {
 	uint32_t auth_timeout_ms;	/* default 2000 */
 	uint32_t stall_timeout_ms;	/* a client whose socket takes no byte for this long is dropped; default 10000 */
 	int mlock;			/* lock the ring in memory (mlock) */
+	int requests;			/* 1: queue REQUEST frames for telem_pop_request */
 	/* Called from the drain thread for each STATS message: fill up to max
 	 * application counters, return how many. May be NULL. */
 	unsigned (*app_counters)(void *arg, struct telem_counter *out, unsigned max);
@@ -184,6 +204,7 @@ struct telem_stats {
 /* ---- the transport -------------------------------------------------------- */
 struct telem_client;
 struct telem_event;
+struct telem_reply;
 
 struct telem {
 	struct telem_cfg cfg;
@@ -215,6 +236,11 @@ struct telem {
 	uint32_t ev_head, ev_tail, ev_cap;
 	_Atomic uint64_t events;
 	_Atomic uint64_t events_dropped;
+	/* requests and replies (under ev_lock) */
+	struct telem_request *req;
+	uint32_t req_head, req_tail;
+	struct telem_reply *rep;
+	uint32_t rep_head, rep_tail;
 	/* network */
 	int listen_fd;
 	int wake_fd[2];
@@ -253,5 +279,13 @@ int telem_push_queues(struct telem *t, uint64_t t_ns, const struct telem_queue_l
 		      unsigned n);
 
 void telem_get_stats(struct telem *t, struct telem_stats *st);
+
+/* Requests (cfg.requests): 1 and *r when one is waiting, else 0. Any thread. */
+int telem_pop_request(struct telem *t, struct telem_request *r);
+/* The answer to r (status 0 ok, else the application's error code; text
+ * truncated to TELEM_REPLY_MAX). Sent to r's client if it is still the same
+ * connection. 0, or -1 when the reply queue is full. Any thread. */
+int telem_reply(struct telem *t, const struct telem_request *r, int32_t status, const char *text,
+		size_t len);
 
 #endif /* SERVOAMP_TELEM_H */

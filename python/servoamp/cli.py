@@ -1,6 +1,7 @@
 """servoamp command-line entry point (host side).
 
     servoamp record --connect HOST:PORT -o FILE.mcap [--duration S] [--token-file F]
+    servoamp bridge --connect HOST:PORT [--listen 127.0.0.1:8765] [--mcap FILE.mcap] [--token-file F]
     servoamp plot FILE.mcap -o DIR [--queues CSV]
     servoamp info FILE.mcap [--json]
 """
@@ -75,6 +76,67 @@ def _cmd_record(args: argparse.Namespace) -> int:
     return 0
 
 
+def _token(args: argparse.Namespace, prog: str) -> tuple[bytes | None, int]:
+    from servoamp.telemetry import read_token as tw_read_token
+
+    if args.token_file:
+        try:
+            return tw_read_token(args.token_file), 0
+        except OSError as e:
+            print(f"servoamp {prog}: --token-file: {e}", file=sys.stderr)
+            return None, 2
+    return (args.token.encode() if args.token else None), 0
+
+
+def _cmd_bridge(args: argparse.Namespace) -> int:
+    from servoamp.bridge import Bridge
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    token, rc = _token(args, "bridge")
+    if rc:
+        return rc
+    host, port = args.connect
+    ws_host, ws_port = args.listen
+    try:
+        b = Bridge(host, port, token=token, ws_host=ws_host, ws_port=ws_port,
+                   serve=not args.no_server, mcap=args.mcap, reconnect=not args.no_reconnect,
+                   connect_timeout=args.connect_timeout, params=not args.no_params)
+    except (OSError, RuntimeError, ValueError) as e:
+        print(f"servoamp bridge: {e}", file=sys.stderr)
+        return 4
+    url = f"ws://{ws_host}:{b.server.port}" if b.server is not None else None
+    try:
+        if url:
+            print(f"servoamp bridge: Foxglove WebSocket on {url} "
+                  f"(Foxglove: Open connection > Foxglove WebSocket)", flush=True)
+        if args.mcap:
+            print(f"servoamp bridge: recording to {args.mcap}", flush=True)
+        try:
+            res = b.run(args.duration, stop)
+        except ConnectionError as e:
+            print(f"servoamp bridge: {e}", file=sys.stderr)
+            return 3
+        if stop.is_set():
+            res.stopped_by = "signal"
+    finally:
+        b.close()
+    d = res.as_dict()
+    d["ws_url"] = url
+    if args.json:
+        print(json.dumps(d))
+    else:
+        print(f"bridged {res.cycles} cycles ({res.messages} messages, {len(res.gaps)} gaps, "
+              f"{res.connections} connections) in {res.wall_s:.1f} s (CPU {res.cpu_s:.2f} s); "
+              f"stopped by {res.stopped_by}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="servoamp", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -103,6 +165,28 @@ def main(argv: list[str] | None = None) -> int:
                           "visible in the process list: prefer --token-file")
     tok.add_argument("--token-file", metavar="FILE", help="read the token from FILE")
 
+    p = sub.add_parser("bridge", help="serve the telemetry to Foxglove (WebSocket) and "
+                                      "record it (MCAP) through the Foxglove SDK")
+    p.add_argument("--connect", type=_hostport, required=True, metavar="HOST:PORT")
+    p.add_argument("--listen", type=_hostport, default=("127.0.0.1", 8765), metavar="HOST:PORT",
+                   help="the Foxglove WebSocket server's address (default 127.0.0.1:8765; "
+                        "port 0: any free port)")
+    p.add_argument("--no-server", action="store_true", help="MCAP only, no WebSocket server")
+    p.add_argument("--no-params", action="store_true",
+                   help="do not offer the parameters capability (whoever reaches the "
+                        "WebSocket port could otherwise set parameters with this token)")
+    p.add_argument("--mcap", metavar="FILE.mcap", help="also write the channels to FILE")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="stop after S seconds (default: until SIGINT/SIGTERM)")
+    p.add_argument("--no-reconnect", action="store_true",
+                   help="stop when the stream ends instead of reconnecting")
+    p.add_argument("--connect-timeout", type=float, default=10.0, metavar="S")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    tok = p.add_mutually_exclusive_group()
+    tok.add_argument("--token", metavar="TOKEN", help="servod's --telemetry-token (prefer "
+                                                      "--token-file); setting parameters needs it")
+    tok.add_argument("--token-file", metavar="FILE", help="read the token from FILE")
+
     p = sub.add_parser("plot", help="PNG figures from a recording")
     p.add_argument("file")
     p.add_argument("-o", "--output", required=True, metavar="DIR")
@@ -120,6 +204,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.cmd == "record":
         return _cmd_record(args)
+    if args.cmd == "bridge":
+        return _cmd_bridge(args)
     if args.cmd == "plot":
         from servoamp.plot import plot
 

@@ -1,13 +1,18 @@
-"""The demo's last step: record the emulated controller into MCAP.
+"""The demo's last step: the emulated controller live in Foxglove and into MCAP.
 
     python -m servoamp.demo_record [--seconds N] [--out build/demo] [--keep-logs] [--program]
+                                   [--ws-port 8765]
 
 Boots the emulated board with networking (gem0 on QEMU user networking,
 host 127.0.0.1:PORT -> guest 7700, see servoamp.netboard), starts servod and
-the firmware, records N seconds (default 5) of every cycle while changing a
-parameter and hanging the firmware on purpose (servod detects it, remoteproc
-recovers it), then writes build/demo/run.mcap, the plots in
-build/demo/plots/, prints ``servoamp info`` and where the files are.
+the firmware, and runs ``servoamp bridge`` on its telemetry for N seconds
+(default 5): the Foxglove WebSocket server on ws://127.0.0.1:8765 (printed;
+another free port if that one is taken) and every cycle into
+build/demo/run.mcap through the Foxglove SDK, while a parameter is set
+through the bridge (the WebSocket protocol's parameters path: servod,
+firmware, back on /servoamp/param) and the firmware is hung on purpose
+(servod detects it, remoteproc recovers it); then the plots in
+build/demo/plots/, ``servoamp info`` and where the files are.
 
 With ``--program`` the axes run the squares-and-circles G-code program (a square and a
 circle, examples/seed004_squares_circles.nc) through servod's motion
@@ -26,7 +31,8 @@ import time
 from pathlib import Path
 
 from servoamp import info, netboard, plot, qemu
-from servoamp.record import RecordResult, record
+from servoamp.bridge import Bridge
+from servoamp.record import RecordResult
 
 
 PROGRAM = "/usr/share/servoamp/examples/seed004_squares_circles.nc"
@@ -45,6 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--port", type=int, default=0, help="host port (default: a free one)")
     ap.add_argument("--keep-logs", action="store_true", help="keep the UART logs")
     ap.add_argument("--no-fault", action="store_true", help="no firmware hang during the recording")
+    ap.add_argument("--ws-port", type=int, default=8765,
+                    help="the Foxglove WebSocket port on 127.0.0.1 (default 8765; taken: a free one)")
     ap.add_argument("--program", action="store_true",
                     help="run the squares-and-circles G-code program while recording")
     args = ap.parse_args(argv)
@@ -74,13 +82,20 @@ def main(argv: list[str] | None = None) -> int:
         cb.ampctl("param set wd_limit 50")
         cb.ampctl("resume", expected_rc=None)
 
+        try:
+            b = Bridge("127.0.0.1", cb.host_port, token=cb.token, ws_port=args.ws_port, mcap=mcap)
+        except RuntimeError:  # the port is taken
+            b = Bridge("127.0.0.1", cb.host_port, token=cb.token, ws_port=0, mcap=mcap)
         box: dict[str, RecordResult] = {}
-        th = threading.Thread(target=lambda: box.update(
-            r=record("127.0.0.1", cb.host_port, mcap, args.seconds, token=cb.token)))
-        _say(f"recording {args.seconds:g} s (host time) into {mcap}")
+        th = threading.Thread(target=lambda: box.update(r=b.run(args.seconds)))
+        _say(f"live in Foxglove: {b.ws_url} (Open connection > Foxglove WebSocket; layout "
+             f"tools/foxglove/servoamp-layout.json) for {args.seconds:g} s (host time)")
+        _say(f"recording through the Foxglove SDK into {mcap}")
         th.start()
         time.sleep(min(1.5, args.seconds / 3))
-        _say("ampctl " + cb.ampctl("param set pos_kp 70").strip())
+        v = b.set_param("pos_kp", 70.0)
+        _say(f"bridge: param set pos_kp 70 -> servod took {v:g}; ampctl param get: "
+             + cb.ampctl("param get pos_kp").strip())
         if args.program:
             _say("ampctl run: " + cb.ampctl(f"run {PROGRAM}").strip())
         if not args.no_fault:
@@ -89,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
             cb.wait_servod_log("recovery complete")
             _say("firmware hung on purpose: servod detected it, remoteproc recovered it")
         th.join()
+        b.close()
         res = box["r"]
         stats = cb.stats()
         if args.program:

@@ -1,8 +1,9 @@
 """MCAP files of servoamp recordings: channels, JSON schemas, writer, reader.
 
-Every channel carries JSON messages (message encoding ``json``) described by
-a JSON Schema (schema encoding ``jsonschema``), which Foxglove opens as they
-are. log_time and publish_time are the controller's own clock
+``servoamp record`` writes JSON messages (message encoding ``json``)
+described by a JSON Schema (schema encoding ``jsonschema``), which Foxglove
+opens as they are; ``servoamp bridge`` writes protobuf (schemas/servoamp.proto,
+through the Foxglove SDK). :func:`iter_json` reads both into the same dicts. log_time and publish_time are the controller's own clock
 (CLOCK_MONOTONIC of the Linux side, ns). docs/recording.md lists the topics.
 """
 
@@ -280,18 +281,21 @@ class ReadResult:
 
 
 def _iter_streaming(f: IO[bytes], topics: set[str] | None, res: ReadResult,
-                    ) -> Iterator[tuple[str, int, bytes]]:
+                    ) -> Iterator[tuple[Channel, Schema | None, int, bytes]]:
     channels: dict[int, Channel] = {}
+    schemas: dict[int, Schema] = {}
     try:
         for rec in StreamReader(f, validate_crcs=True).records:
-            if isinstance(rec, Channel):
+            if isinstance(rec, Schema):
+                schemas[rec.id] = rec
+            elif isinstance(rec, Channel):
                 channels[rec.id] = rec
             elif isinstance(rec, Message):
                 ch = channels.get(rec.channel_id)
                 if ch is None:
                     raise McapError(f"message on unknown channel {rec.channel_id}")
                 if topics is None or ch.topic in topics:
-                    yield ch.topic, rec.log_time, rec.data
+                    yield ch, schemas.get(ch.schema_id), rec.log_time, rec.data
     except (McapError, struct.error, ValueError, EOFError, zlib.error, OSError) as e:
         res.error = f"{type(e).__name__}: {e}"
     except Exception as e:  # noqa: BLE001 - decompressors raise their own types
@@ -315,6 +319,13 @@ def iter_messages(path: Path | str, topics: Iterable[str] | None = None,
     recorder was killed) is read record by record up to the last complete,
     CRC-checked chunk, and ``result.error`` says where it stopped.
     """
+    for ch, _schema, t, data in _iter_records(path, topics, result):
+        yield ch.topic, t, data
+
+
+def _iter_records(path: Path | str, topics: Iterable[str] | None = None,
+                  result: ReadResult | None = None
+                  ) -> Iterator[tuple[Channel, Schema | None, int, bytes]]:
     res = result if result is not None else ReadResult(False, "")
     tset = set(topics) if topics is not None else None
     path = Path(path)
@@ -324,10 +335,10 @@ def iter_messages(path: Path | str, topics: Iterable[str] | None = None,
                 reader = make_reader(f)
                 if reader.get_summary() is not None:
                     res.complete = True
-                    for _s, ch, msg in reader.iter_messages(
+                    for sc, ch, msg in reader.iter_messages(
                             topics=list(tset) if tset is not None else None,
                             log_time_order=False):
-                        yield ch.topic, msg.log_time, msg.data
+                        yield ch, sc, msg.log_time, msg.data
                     return
             except McapError:
                 f.seek(0)
@@ -336,10 +347,64 @@ def iter_messages(path: Path | str, topics: Iterable[str] | None = None,
         yield from _iter_streaming(f, tset, res)
 
 
+class _ProtobufDecoder:
+    """Message classes built from the schemas in the file (FileDescriptorSet)."""
+
+    def __init__(self) -> None:
+        self.classes: dict[tuple[str, bytes], Any] = {}
+
+    def decode(self, schema: Schema, data: bytes) -> Any:
+        from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+        key = (schema.name, schema.data)
+        cls = self.classes.get(key)
+        if cls is None:
+            pool = descriptor_pool.DescriptorPool()
+            fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
+            for fd in fds.file:
+                pool.Add(fd)
+            cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+            self.classes[key] = cls
+        return cls.FromString(data)
+
+
 def iter_json(path: Path | str, topics: Iterable[str] | None = None,
               result: ReadResult | None = None) -> Iterator[tuple[str, int, Any]]:
-    for topic, t, data in iter_messages(path, topics, result):
-        yield topic, t, json.loads(data)
+    """(topic, log_time, message as a dict) of every message, in file order,
+    for JSON and protobuf recordings alike. For a protobuf recording (one
+    /servoamp/cycle message with every axis), the /servoamp/axis/<i> and
+    /servoamp/path messages of the JSON recordings are derived from it."""
+    from servoamp import pbenc
+
+    want = set(topics) if topics is not None else None
+    derive = want is None or T_PATH in want or any(t.startswith("/servoamp/axis/") for t in want)
+    read = None if want is None else want | ({T_CYCLE} if derive else set())
+    dec = _ProtobufDecoder()
+    for ch, schema, t, data in _iter_records(path, read, result):
+        if ch.message_encoding != "protobuf" or schema is None:
+            if want is None or ch.topic in want:
+                yield ch.topic, t, json.loads(data)
+            continue
+        if schema.name == "servoamp.Cycle":
+            c = pbenc.decode_cycle(data)
+            axes = c.pop("axes", [])
+            if want is None or ch.topic in want:
+                yield ch.topic, t, c
+            if derive:
+                c["axes"] = axes
+                for a in pbenc.axis_dicts(c):
+                    topic = axis_topic(a["axis"])
+                    if want is None or topic in want:
+                        yield topic, t, a
+                pth = pbenc.path_dict(c)
+                if pth is not None and (want is None or T_PATH in want):
+                    yield T_PATH, t, pth
+            continue
+        m = pbenc.to_dict(dec.decode(schema, data))
+        if schema.name == "foxglove.Log":
+            ts = m.get("timestamp") or {}
+            m["timestamp"] = {"sec": ts.get("seconds", 0), "nsec": ts.get("nanos", 0)}
+        yield ch.topic, t, m
 
 
 def read_metadata(path: Path | str) -> list[Metadata]:

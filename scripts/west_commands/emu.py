@@ -25,7 +25,9 @@ interactive mode prints the command to do it. servod's telemetry listens on
 the guest's loopback unless told otherwise: start it with `servod
 --telemetry 10.0.2.15:7700 --telemetry-token FILE` in the guest, then
 `servoamp record --connect 127.0.0.1:PORT --token-file FILE -o run.mcap`
-on the host records the controller (docs/telemetry.md, "Who may connect").
+on the host records the controller (docs/telemetry.md, "Who may connect"),
+and `servoamp bridge --connect 127.0.0.1:PORT --token-file FILE [--mcap
+run.mcap]` serves it live to Foxglove on ws://127.0.0.1:8765 (printed).
 
 Also runs without a west workspace: ``.venv/bin/python scripts/west_commands/emu.py``.
 """
@@ -80,6 +82,9 @@ def net_args(board: qemu.Board, port: int | None) -> tuple[list[str], int | None
     host_port = port or netboard.free_port()
     print(f"[emu] network: {net['nic']} (eth0, {net['guest_addr']}), "
           f"host 127.0.0.1:{host_port} -> guest :{net['telemetry_port']}")
+    print(f"[emu] live in Foxglove: .venv/bin/servoamp bridge --connect 127.0.0.1:{host_port} "
+          f"--token-file FILE [--mcap run.mcap], then open ws://127.0.0.1:8765 "
+          f"(Open connection > Foxglove WebSocket)")
     return netboard.nic_args(host_port, int(net["telemetry_port"]), str(net["nic"])), host_port
 
 
@@ -111,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
                   "> /tmp/token; chmod 600 /tmp/token; servod --telemetry 10.0.2.15:7700 --telemetry-token /tmp/token &")
             print(f"[emu] and record on the host (token copied from the guest's /tmp/token): "
                   f".venv/bin/servoamp record --connect 127.0.0.1:{host_port} --token TOKEN -o run.mcap")
+            print(f"[emu] or watch it live: .venv/bin/servoamp bridge --connect 127.0.0.1:{host_port} "
+                  f"--token TOKEN --mcap run.mcap, and open ws://127.0.0.1:8765 in Foxglove")
         return qemu.interactive(board, images, accel=args.accel, extra_args=extra, clock=clock, icount=args.icount)
     return scripted(board, images, commands, args, extra, clock, net=host_port is not None)
 

@@ -48,3 +48,5 @@ def test_emu_net_forwards_the_telemetry_port(images: qemu.Images) -> None:
     assert proc.returncode == 0, out[-3000:]
     assert f"host 127.0.0.1:{port} -> guest :{guest_port}" in out
     assert "carrier 1" in out
+    # where to watch it live (servoamp bridge, docs/recording.md)
+    assert f"servoamp bridge --connect 127.0.0.1:{port}" in out and "ws://127.0.0.1:8765" in out

@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
-"""Writes tools/foxglove/servoamp-layout.json, the Foxglove layout for
-servoamp recordings (docs/recording.md): command vs feedback per axis, the
+"""Writes tools/foxglove/servoamp-layout.json, the Foxglove layout for the
+channels `servoamp bridge` serves live and records (docs/recording.md,
+python/servoamp/schemas/servoamp.proto): command vs feedback per axis, the
 XY path (commanded and actual), following errors, latencies, exchange
-status, statistics and the firmware log.
+status and queue levels, the firmware log, statistics, gaps and the
+controller's parameters (live connection).
 
     python3 tools/foxglove/make_layout.py [--axes N] [-o FILE]
 """
@@ -45,31 +47,31 @@ def _stack(ids: list[str], direction: str = "column") -> Any:
 def layout(n_axes: int) -> dict[str, Any]:
     cfg: dict[str, Any] = {}
     axis_ids = []
+    ax = "/servoamp/cycle.axes"
     for i in range(n_axes):
         pid = f"Plot!axis{i}"
-        t = f"/servoamp/axis/{i}"
         cfg[pid] = _plot(f"axis {i}: position command vs feedback", [
-            _path(f"{t}.command.target_pos", "command"),
-            _path(f"{t}.feedback.actual_pos", "actual"),
+            _path(f"{ax}[{i}].command.target_pos", "command"),
+            _path(f"{ax}[{i}].feedback.actual_pos", "actual"),
         ])
         axis_ids.append(pid)
     cfg["Plot!ferr"] = _plot("following error", [
-        _path(f"/servoamp/axis/{i}.feedback.following_error", f"axis {i}") for i in range(n_axes)])
+        _path(f"{ax}[{i}].feedback.following_error", f"axis {i}") for i in range(n_axes)])
     cfg["Plot!xycmd"] = _plot("XY path, commanded (axis 0 / axis 1)",
-                              [_path("/servoamp/path.command.y", "commanded")],
+                              [_path(f"{ax}[1].command.target_pos", "commanded")],
                               xAxisVal="custom",
-                              xAxisPath={"value": "/servoamp/path.command.x", "enabled": True})
+                              xAxisPath={"value": f"{ax}[0].command.target_pos", "enabled": True})
     cfg["Plot!xyact"] = _plot("XY path, actual (axis 0 / axis 1)",
-                              [_path("/servoamp/path.actual.y", "actual")],
+                              [_path(f"{ax}[1].feedback.actual_pos", "actual")],
                               xAxisVal="custom",
-                              xAxisPath={"value": "/servoamp/path.actual.x", "enabled": True})
+                              xAxisPath={"value": f"{ax}[0].feedback.actual_pos", "enabled": True})
     cfg["Plot!latency"] = _plot("latency (ns)", [
         _path("/servoamp/cycle.wake_latency_ns", "servod wake-up"),
         _path("/servoamp/cycle.irq_latency_ns", "servo irq"),
     ])
     cfg["Plot!exchange"] = _plot("exchange status (0 fresh, 1 stale, 2 torn, 3 missed, "
                                  "4 invalid, 5 none) and queue levels", [
-        _path("/servoamp/cycle.exchange_code", "exchange"),
+        _path("/servoamp/cycle.exchange", "exchange"),
         _path("/servoamp/queues.levels.blocks", "blocks"),
         _path("/servoamp/queues.levels.segments", "segments"),
         _path("/servoamp/queues.levels.setpoints", "setpoints"),
@@ -81,12 +83,13 @@ def layout(n_axes: int) -> dict[str, Any]:
     cfg["RawMessages!gap"] = {"topicPath": "/servoamp/gap", "diffEnabled": False,
                               "diffMethod": "custom", "diffTopicPath": "",
                               "showFullMessageForDiff": False, "expansion": "all"}
+    cfg["Parameters!params"] = {"title": "servod parameters (live connection)"}
     left = _stack(axis_ids)
     middle = _split(_split("Plot!xycmd", "Plot!xyact", "row"),
                     _split("Plot!ferr", _split("Plot!latency", "Plot!exchange", "column"),
                            "column", 40), "column", 40)
-    right = _split("RosOut!log", _split("RawMessages!stats", "RawMessages!gap", "column", 60),
-                   "column", 50)
+    right = _split(_split("RosOut!log", "Parameters!params", "column", 50),
+                   _split("RawMessages!stats", "RawMessages!gap", "column", 60), "column", 60)
     return {
         "configById": cfg,
         "globalVariables": {},

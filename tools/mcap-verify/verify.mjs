@@ -7,9 +7,18 @@
 //   node tools/mcap-verify/verify.mjs --stream FILE.mcap   record-by-record (e.g. truncated)
 //
 // Exit status 0 when the file was read (JSON says what was found), 1 on error.
+// JSON messages are parsed as JSON; protobuf messages (servoamp bridge) are
+// decoded with protobufjs from the FileDescriptorSet in the file's schema
+// record (as Foxglove does); undecodable messages count as json_errors /
+// decode_errors.
 import { McapIndexedReader, McapStreamReader } from "@mcap/core";
 import { loadDecompressHandlers } from "@mcap/support";
 import { open, readFile } from "node:fs/promises";
+import { createRequire } from "node:module";
+
+const require = createRequire(import.meta.url);
+const protobuf = require("protobufjs");
+const { FileDescriptorSet } = require("protobufjs/ext/descriptor");
 
 const args = process.argv.slice(2);
 const stream = args[0] === "--stream";
@@ -28,6 +37,7 @@ const out = {
   schemas: {},
   encodings: {},
   json_errors: 0,
+  decode_errors: 0,
   log_time_min: null,
   log_time_max: null,
   cycles: { count: 0, first: null, last: null, non_increasing: 0 },
@@ -38,7 +48,19 @@ const out = {
   error: null,
 };
 
-function onMessage(channel, schemaName, msg) {
+const pbTypes = new Map(); // schema id -> protobufjs Type
+function pbType(schema) {
+  let t = pbTypes.get(schema.id);
+  if (!t) {
+    const root = protobuf.Root.fromDescriptor(FileDescriptorSet.decode(schema.data));
+    root.resolveAll();
+    t = root.lookupType(schema.name);
+    pbTypes.set(schema.id, t);
+  }
+  return t;
+}
+
+function onMessage(channel, schemaName, msg, schema) {
   const topic = channel.topic;
   out.messages++;
   out.by_topic[topic] = (out.by_topic[topic] ?? 0) + 1;
@@ -48,11 +70,20 @@ function onMessage(channel, schemaName, msg) {
   if (out.log_time_min === null || BigInt(t) < BigInt(out.log_time_min)) out.log_time_min = t;
   if (out.log_time_max === null || BigInt(t) > BigInt(out.log_time_max)) out.log_time_max = t;
   let obj;
-  try {
-    obj = JSON.parse(new TextDecoder().decode(msg.data));
-  } catch {
-    out.json_errors++;
-    return;
+  if (channel.messageEncoding === "protobuf") {
+    try {
+      obj = pbType(schema).toObject(pbType(schema).decode(msg.data), { longs: Number, defaults: true });
+    } catch {
+      out.decode_errors++;
+      return;
+    }
+  } else {
+    try {
+      obj = JSON.parse(new TextDecoder().decode(msg.data));
+    } catch {
+      out.json_errors++;
+      return;
+    }
   }
   if (topic === "/servoamp/cycle") {
     const c = out.cycles;
@@ -85,7 +116,7 @@ try {
     for await (const msg of reader.readMessages()) {
       const ch = reader.channelsById.get(msg.channelId);
       const sc = reader.schemasById.get(ch.schemaId);
-      onMessage(ch, sc ? sc.name : null, msg);
+      onMessage(ch, sc ? sc.name : null, msg, sc);
     }
     out.complete = true;
     await fh.close();
@@ -106,7 +137,7 @@ try {
         else if (rec.type === "Message") {
           const ch = channels.get(rec.channelId);
           const sc = schemas.get(ch.schemaId);
-          onMessage(ch, sc ? sc.name : null, rec);
+          onMessage(ch, sc ? sc.name : null, rec, sc);
         } else if (rec.type === "ChunkIndex") chunks++;
         else if (rec.type === "Footer") out.complete = true;
       }

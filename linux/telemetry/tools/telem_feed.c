@@ -11,8 +11,11 @@
  *              [--restart-at CYCLE] [--param-every N] [--log-every N]
  *              [--queues-every N] [--burst] [--linger-ms MS] [--id NAME]
  *              [--client-buffer BYTES] [--stats-ms MS] [--start-cycle C]
- *              [--token STR] [--auth-ms MS] [--stall-ms MS]
+ *              [--token STR] [--auth-ms MS] [--stall-ms MS] [--params]
  *
+ * --params answers REQUEST frames like servod's parameter service, for one
+ * parameter (pos_kp, f32 in [0, 1000] 1/s): "param list", "param get
+ * pos_kp", "param set pos_kp V" (a set is published as a PARAM event).
  * Prints "listening 127.0.0.1 PORT" (flushed) when ready, and at the end one
  * JSON line: {"pushed":..,"dropped":..,"drained":..,"client_lost":..,...}.
  * --burst pushes as fast as it can (drops when the drain thread falls behind).
@@ -52,7 +55,46 @@ struct opts {
 	int burst;
 	const char *token;
 	unsigned auth_ms, stall_ms;
+	int params;
 };
+
+/* --params: servod's "param" requests (params.c) for one parameter. */
+static double feed_kp = 50.0;
+
+static void serve_params(struct telem *t)
+{
+	struct telem_request r;
+
+	while (telem_pop_request(t, &r)) {
+		char out[256], name[40] = "", val[40] = "", v2[40] = "", *end;
+		int32_t st = 0;
+		int n;
+
+		n = sscanf(r.text, "param %39s %39s %39s", name, val, v2);
+		if (n >= 1 && !strcmp(name, "list")) {
+			snprintf(out, sizeof(out), "%-3s %-16s %-4s %-10s %-12s %-12s %-12s %s\n"
+				 "3   %-16s f32  %-10s %-12s %-12s %-12s %.9g\n", "id", "name", "type", "unit",
+				 "min", "max", "default", "value", "pos_kp", "1/s", "0", "1000", "50", feed_kp);
+		} else if (n == 2 && !strcmp(name, "get") && !strcmp(val, "pos_kp")) {
+			snprintf(out, sizeof(out), "pos_kp=%.9g 1/s\n", feed_kp);
+		} else if (n == 3 && !strcmp(name, "set") && !strcmp(val, "pos_kp")) {
+			double v = strtod(v2, &end);
+
+			if (*end || !(v >= 0.0 && v <= 1000.0)) {
+				st = 6;	/* SE_VALUE */
+				snprintf(out, sizeof(out), "pos_kp: %s out of range [0, 1000] 1/s", v2);
+			} else {
+				feed_kp = (double)(float)v;
+				telem_push_param(t, 0, 3, "pos_kp", TELEM_P_F32, feed_kp, "1/s");
+				snprintf(out, sizeof(out), "pos_kp=%.9g 1/s\n", feed_kp);
+			}
+		} else {
+			st = 1;	/* SE_USAGE */
+			snprintf(out, sizeof(out), "usage: param list | param get NAME | param set NAME VALUE");
+		}
+		telem_reply(t, &r, st, out, strlen(out));
+	}
+}
 
 struct app {
 	_Atomic unsigned long long exchanges, stale, missed, restarts;	/* read by the drain thread */
@@ -88,14 +130,14 @@ static int usage(void)
 			"[--ring CAP] [--wait-clients K] [--wait-timeout S] [--restart-at C] "
 			"[--param-every N] [--log-every N] [--queues-every N] [--burst] "
 			"[--linger-ms MS] [--id NAME] [--client-buffer B] [--stats-ms MS] [--start-cycle C] "
-			"[--token STR] [--auth-ms MS] [--stall-ms MS]\n");
+			"[--token STR] [--auth-ms MS] [--stall-ms MS] [--params]\n");
 	return 2;
 }
 
 int main(int argc, char **argv)
 {
 	struct opts o = { "127.0.0.1", "telem_feed", 0, 4, 4096, 0, 1u << 20, 500, 2000,
-			  1000.0, 10.0, 1000, 0, 0, 0, 0, 0, 0, NULL, 0, 0 };
+			  1000.0, 10.0, 1000, 0, 0, 0, 0, 0, 0, NULL, 0, 0, 0 };
 	struct app app = { 0, 0, 0, 0 };
 	struct telem_cfg cfg;
 	static struct telem t;
@@ -133,6 +175,7 @@ int main(int argc, char **argv)
 		if (!strcmp(a, "--id") && v) { o.id = v; i++; continue; }
 		if (!strcmp(a, "--token") && v) { o.token = v; i++; continue; }
 		if (!strcmp(a, "--burst")) { o.burst = 1; continue; }
+		if (!strcmp(a, "--params")) { o.params = 1; continue; }
 		return usage();
 	}
 	if (o.axes < 1 || o.axes > AMP_MAX_AXES || o.rate <= 0.0 || o.port > 65535)
@@ -160,6 +203,7 @@ int main(int argc, char **argv)
 		cfg.stall_timeout_ms = o.stall_ms;
 	cfg.app_counters = app_counters;
 	cfg.app_arg = &app;
+	cfg.requests = o.params;
 	rc = telem_init(&t, &cfg);
 	if (rc) {
 		fprintf(stderr, "telem_feed: telem_init: %s\n", strerror(-rc));
@@ -274,6 +318,8 @@ int main(int argc, char **argv)
 		}
 		telem_push_cycle(&t, &rec);
 		sent++;
+		if (o.params)
+			serve_params(&t);
 		if (o.param_every && k && k % o.param_every == 0) {
 			double kp = 60.0 + (double)(k / o.param_every);
 

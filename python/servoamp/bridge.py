@@ -1,0 +1,540 @@
+"""Live in Foxglove: the controller's telemetry over the Foxglove WebSocket
+protocol and into MCAP, through the Foxglove SDK (foxglove-sdk).
+
+    from servoamp.bridge import Bridge
+    with Bridge("127.0.0.1", 7700, token=tok, mcap="run.mcap") as b:
+        print(b.ws_url)                 # open it in Foxglove
+        res = b.run(duration=10.0)
+
+One set of channels, two sinks: a WebSocket server (default 127.0.0.1:8765)
+and, with ``mcap``, an MCAP file; live and recorded data are the same
+messages. Per-cycle data is protobuf (schemas/servoamp.proto, encoded by
+:mod:`servoamp.pbenc`), the firmware trace foxglove.Log. The protocol's
+parameters capability lists servod's parameters and sets them through the
+telemetry connection (REQUEST frames, docs/telemetry.md "Requests"): servod
+applies a set with the same handler as ``ampctl param set``, and the change
+comes back as a PARAM event on /servoamp/param. A refused value comes back
+to the app as an error status; nothing changes. docs/recording.md "Live".
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import socket
+import struct
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Callable
+
+import foxglove
+from foxglove import Channel, Parameter, ParameterType, Schema
+from foxglove.channels import LogChannel
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+from foxglove.messages import Log, LogLevel, Timestamp
+from foxglove.websocket import Capability, ServerListener, StatusLevel
+
+from servoamp import pbenc
+from servoamp import telemetry as tw
+from servoamp.record import RecordResult
+from servoamp.schemas import servoamp_pb2 as pb
+
+MSG_REQUEST = 9   # client -> server: u32 id, text
+MSG_REPLY = 10    # server -> client: u32 id, i32 status, u32 n, text
+REPLY_HDR = struct.Struct("<IiI")
+REQUEST_MAX = 256
+
+T_CYCLE = "/servoamp/cycle"
+T_PARAM = "/servoamp/param"
+T_STATS = "/servoamp/stats"
+T_LOG = "/servoamp/log"
+T_GAP = "/servoamp/gap"
+T_QUEUES = "/servoamp/queues"
+T_SESSION = "/servoamp/session"
+
+# topic -> protobuf message name (package servoamp); /servoamp/log is foxglove.Log
+CHANNELS = {T_CYCLE: "Cycle", T_PARAM: "ParamChange", T_STATS: "Stats", T_GAP: "Gap",
+            T_QUEUES: "QueueLevels", T_SESSION: "Session"}
+TOPICS = sorted(list(CHANNELS) + [T_LOG])
+
+_LEVELS = {0: LogLevel.Unknown, 1: LogLevel.Debug, 2: LogLevel.Info, 3: LogLevel.Warning,
+           4: LogLevel.Error, 5: LogLevel.Fatal}
+
+
+def is_loopback(host: str) -> bool:
+    """127.0.0.0/8, ::1 or localhost."""
+    import ipaddress
+
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+class ParamError(Exception):
+    """servod refused a parameter request (its message)."""
+
+    def __init__(self, status: int, msg: str) -> None:
+        super().__init__(msg)
+        self.status = status
+
+
+@dataclass
+class ParamInfo:
+    id: int
+    name: str
+    type: str   # u32, i32, f32
+    unit: str
+    min: float
+    max: float
+    value: float | int
+    read_only: bool
+
+
+def parse_param_list(text: str) -> dict[str, ParamInfo]:
+    """servod's ``param list`` table (params.c): id name type unit min max default value [(ro)]."""
+    out: dict[str, ParamInfo] = {}
+    for line in text.splitlines()[1:]:
+        f = line.split()
+        if len(f) < 8 or not f[0].isdigit():
+            continue
+        typ = f[2]
+        val: float | int = float(f[7]) if typ == "f32" else int(f[7])
+        out[f[1]] = ParamInfo(int(f[0]), f[1], typ, "" if f[3] == "-" else f[3], float(f[4]),
+                              float(f[5]), val, "(ro)" in f[8:])
+    return out
+
+
+def fox_param(name: str, typ: str, v: float | int) -> Parameter:
+    if typ == "f32":
+        return Parameter(name, value=float(v), type=ParameterType.Float64)
+    return Parameter(name, value=int(v))
+
+
+class Bridge:
+    """Telemetry client + Foxglove SDK sinks (WebSocket server, MCAP file)."""
+
+    def __init__(self, host: str, port: int, *, token: bytes | str | None = None,
+                 ws_host: str = "127.0.0.1", ws_port: int = 8765, serve: bool = True,
+                 mcap: str | Path | None = None, reconnect: bool = True,
+                 connect_timeout: float = 10.0, max_backoff: float = 2.0,
+                 request_timeout: float = 10.0, message_backlog: int = 1 << 16,
+                 params: bool = True,
+                 on_progress: Callable[[RecordResult], None] | None = None) -> None:
+        self.host, self.port = host, port
+        self.auth = tw.encode_auth(token)
+        self.reconnect = reconnect
+        self.connect_timeout = connect_timeout
+        self.max_backoff = max_backoff
+        self.request_timeout = request_timeout
+        self.on_progress = on_progress
+        self.res = RecordResult(path=str(mcap) if mcap else "")
+        self.ctx = foxglove.Context()
+        self.fds = pbenc.file_descriptor_set()
+        self.ch: dict[str, Channel] = {
+            t: Channel(t, message_encoding="protobuf", context=self.ctx,
+                       schema=Schema(name=f"servoamp.{m}", encoding="protobuf", data=self.fds))
+            for t, m in CHANNELS.items()}
+        self.ch_log = LogChannel(T_LOG, context=self.ctx)
+        # telemetry state
+        self.sock: socket.socket | None = None
+        self.send_lock = threading.Lock()
+        self.req_ids = itertools.count(1)
+        self.pending: dict[int, tuple[threading.Event, list[Any]]] = {}
+        self.pending_lock = threading.Lock()
+        self.hello: tw.Hello | None = None
+        self.n_axes = 0
+        self.enc: Callable[[bytes | bytearray, int], bytes] | None = None
+        self.csize = 0
+        self.expect: int | None = None
+        self.last_cycle: int | None = None
+        self.last_t_ns = 0
+        self.pending_reconnect: tuple[int | None, bool] | None = None
+        self.final_seen = False
+        self.meta_written = False
+        self.params: dict[str, ParamInfo] = {}
+        self.params_on = params
+        self.server = None  # a taken port raises before any file is opened
+        if serve:
+            if not is_loopback(ws_host):
+                raise ValueError(f"{ws_host} is not a loopback address: the WebSocket server "
+                                 "has no access control, and whoever reaches it can set the "
+                                 "controller's parameters with this bridge's token (use an SSH "
+                                 "tunnel for another machine)")
+            self.server = foxglove.start_server(
+                name="servoamp", host=ws_host, port=ws_port, context=self.ctx,
+                capabilities=[Capability.Parameters] if params else [],
+                server_listener=_Listener(self) if params else None,
+                message_backlog_size=message_backlog)
+        self.mcap = None
+        if mcap is not None:
+            self.mcap = foxglove.open_mcap(
+                str(mcap), allow_overwrite=True, context=self.ctx,
+                writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd,
+                                                chunk_size=1 << 20))
+
+    # -- the app's side ----------------------------------------------------------------
+    @property
+    def ws_url(self) -> str | None:
+        return f"ws://127.0.0.1:{self.server.port}" if self.server is not None else None
+
+    def __enter__(self) -> Bridge:
+        return self
+
+    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+        if self.mcap is not None:
+            self.mcap.write_metadata("servoamp.recording", {
+                "cycles": str(self.res.cycles), "connections": str(self.res.connections),
+                "gaps": str(len(self.res.gaps)), "stopped_by": self.res.stopped_by or "error",
+                "last_stats": json.dumps(self.res.last_stats)})
+            self.mcap.close()
+            self.mcap = None
+
+    # -- parameters through servod ------------------------------------------------------
+    def request(self, text: str) -> str:
+        """One REQUEST to servod: its output, or ParamError with its message."""
+        data = text.encode()
+        if len(data) > REQUEST_MAX:
+            raise ParamError(1, "request too long")
+        rid = next(self.req_ids) & 0xFFFFFFFF
+        ev = threading.Event()
+        slot: list[Any] = []
+        with self.pending_lock:
+            self.pending[rid] = (ev, slot)
+        try:
+            with self.send_lock:
+                if self.sock is None:
+                    raise ParamError(-3, "not connected to the controller")
+                self.sock.sendall(tw.FRAME.pack(MSG_REQUEST, 0, 4 + len(data))
+                                  + struct.pack("<I", rid) + data)
+            if not ev.wait(self.request_timeout):
+                raise ParamError(-4, f"no answer from the controller in {self.request_timeout} s")
+        except OSError as e:
+            raise ParamError(-3, f"not connected to the controller: {e}") from None
+        finally:
+            with self.pending_lock:
+                self.pending.pop(rid, None)
+        status, msg = slot
+        if status != 0:
+            raise ParamError(status, msg)
+        return str(msg)
+
+    def list_params(self) -> dict[str, ParamInfo]:
+        self.params = parse_param_list(self.request("param list"))
+        return self.params
+
+    def set_param(self, name: str, value: float | int | str) -> float | int:
+        """Set through servod: the value the servo took (ParamError if refused)."""
+        if isinstance(value, float) and value.is_integer() and \
+                self.params.get(name, None) is not None and self.params[name].type != "f32":
+            value = int(value)
+        out = self.request(f"param set {name} {value}")
+        v = out.strip().split("=", 1)[1].split()[0]
+        info = self.params.get(name)
+        if info is not None:
+            info.value = float(v) if info.type == "f32" else int(v)
+            return info.value
+        return float(v)
+
+    def _on_reply(self, p: bytes) -> None:
+        if len(p) < REPLY_HDR.size:
+            return
+        rid, status, n = REPLY_HDR.unpack_from(p)
+        text = p[REPLY_HDR.size:REPLY_HDR.size + min(n, len(p) - REPLY_HDR.size)]
+        with self.pending_lock:
+            entry = self.pending.get(rid)
+        if entry is not None:
+            entry[1][:] = [status, text.decode("utf-8", "replace")]
+            entry[0].set()
+
+    # -- telemetry -> channels ----------------------------------------------------------
+    def _gap(self, t_ns: int, reason: str, source: str, frm: int | None, to: int | None,
+             lost: int | None, detail: str) -> None:
+        g = pb.Gap(reason=reason, source=source, detail=detail)
+        if frm is not None:
+            g.from_cycle = frm
+        if to is not None:
+            g.to_cycle = to
+        if lost is not None:
+            g.lost = lost
+        self.ch[T_GAP].log(g.SerializeToString(), log_time=t_ns)
+        self.res.gaps.append({"reason": reason, "source": source, "from_cycle": frm,
+                              "to_cycle": to, "lost": lost, "detail": detail, "t_ns": t_ns})
+
+    def _on_hello(self, h: tw.Hello) -> None:
+        prev = self.hello
+        self.res.connections += 1
+        if prev is not None:
+            self.pending_reconnect = (self.last_cycle, prev.session_id != h.session_id)
+            self.expect = None
+        self.hello = h
+        self.res.controller_id = h.controller_id
+        self.final_seen = False
+        tick_ns = 1e9 / h.clock_hz if h.clock_hz else 0.0
+        self.n_axes = h.n_axes
+        self.enc = pbenc.cycle_encoder(h.n_axes, tick_ns)
+        self.csize = tw.cycle_struct(h.n_axes).size
+        self.ch[T_SESSION].log(pb.Session(
+            connection=self.res.connections, controller_id=h.controller_id,
+            session_id=f"{h.session_id:016x}", wire_version=h.version, n_axes=h.n_axes,
+            cycle_period_ns=h.cycle_period_ns, clock_hz=h.clock_hz,
+            ring_capacity=h.ring_capacity, realtime_ns=h.realtime_ns).SerializeToString(),
+            log_time=h.t_ns)
+        if not self.meta_written and self.mcap is not None:
+            self.meta_written = True
+            self.mcap.write_metadata("servoamp", {
+                "controller_id": h.controller_id, "n_axes": str(h.n_axes),
+                "cycle_period_ns": str(h.cycle_period_ns), "clock_hz": str(h.clock_hz),
+                "wire_version": str(h.version), "session_id": f"{h.session_id:016x}",
+                "realtime_minus_monotonic_ns": str(h.realtime_ns - h.t_ns),
+                "time_base": "controller CLOCK_MONOTONIC (ns)", "encoding": "protobuf"})
+
+    def _cycle_discontinuity(self, cyc: int, t_ns: int) -> None:
+        pr = self.pending_reconnect
+        if pr is not None:
+            self.pending_reconnect = None
+            last, new_session = pr
+            if last is None:
+                pass
+            elif new_session:
+                self._gap(t_ns, "producer_restart", "recorder", last + 1,
+                          cyc - 1 if cyc > last else None, None,
+                          "telemetry producer restarted (new session); cycles in between "
+                          "were not received")
+            else:
+                self._gap(t_ns, "reconnect", "recorder", last + 1, cyc - 1,
+                          cyc - last - 1 if cyc > last else None,
+                          "connection lost and re-established")
+        elif self.expect is not None:
+            self._gap(t_ns, "other", "recorder", self.expect, cyc - 1,
+                      cyc - self.expect if cyc > self.expect else None,
+                      "cycle counter discontinuity not announced by the controller")
+
+    def _process(self, buf: bytearray, frames: Any) -> None:
+        log_cycle = self.ch[T_CYCLE].log
+        enc = self.enc
+        csize = self.csize
+        cyc_from = struct.Struct("<QQ").unpack_from
+        cycles = 0
+        nmsg = 0
+        t_ns = self.last_t_ns
+        for typ, off, ln in frames:
+            if typ == tw.MSG_CYCLE:
+                if enc is None or ln < csize:
+                    raise tw.ProtocolError(f"CYCLE of {ln} bytes, expected {csize}")
+                cyc, t_ns = cyc_from(buf, off)
+                if cyc != self.expect:
+                    self._cycle_discontinuity(cyc, t_ns)
+                self.expect = cyc + 1
+                log_cycle(enc(buf, off), log_time=t_ns)
+                cycles += 1
+                nmsg += 1
+                if self.res.first_cycle is None:
+                    self.res.first_cycle = cyc
+                self.last_cycle = cyc
+                continue
+            p = bytes(buf[off:off + ln])
+            nmsg += 1
+            if typ == tw.MSG_HELLO:
+                self._on_hello(tw.decode_hello(p))
+                enc = self.enc
+                csize = self.csize
+            elif typ == tw.MSG_STATS:
+                s = tw.decode_stats(p)
+                d = {"last_cycle": s.last_cycle, "pushed": s.pushed, "dropped": s.dropped,
+                     "drained": s.drained, "client_lost": s.client_lost,
+                     "client_events_lost": s.client_events_lost, "events": s.events,
+                     "events_dropped": s.events_dropped, "bytes_sent": s.bytes_sent,
+                     "ring_high_water": s.ring_high_water, "ring_capacity": s.ring_capacity,
+                     "clients": s.clients, "final": s.final}
+                self.ch[T_STATS].log(pb.Stats(
+                    last_cycle=s.last_cycle, pushed=s.pushed, dropped=s.dropped,
+                    drained=s.drained, client_lost=s.client_lost,
+                    client_events_lost=s.client_events_lost, events=s.events,
+                    events_dropped=s.events_dropped, bytes_sent=s.bytes_sent,
+                    ring_high_water=s.ring_high_water, ring_capacity=s.ring_capacity,
+                    clients=s.clients, final=s.final, counters=s.counters).SerializeToString(),
+                    log_time=s.t_ns)
+                self.res.last_stats = dict(d, counters=s.counters)
+                self.final_seen = self.final_seen or s.final
+            elif typ == tw.MSG_PARAM:
+                q = tw.decode_param(p)
+                self.ch[T_PARAM].log(pb.ParamChange(
+                    cycle=q.cycle, id=q.id, name=q.name, type=q.type, value=q.value,
+                    unit=q.unit).SerializeToString(), log_time=q.t_ns)
+                info = self.params.get(q.name)
+                if info is not None:
+                    info.value = q.value if info.type == "f32" else int(q.value)
+                if self.server is not None and self.params_on:
+                    self.server.publish_parameter_values([fox_param(q.name, q.type, q.value)])
+            elif typ == tw.MSG_LOG:
+                lg = tw.decode_log(p)
+                self.ch_log.log(Log(timestamp=Timestamp(lg.t_ns // 1_000_000_000,
+                                                        lg.t_ns % 1_000_000_000),
+                                    level=_LEVELS.get(lg.level, LogLevel.Unknown),
+                                    message=lg.text, name=lg.source), log_time=lg.t_ns)
+            elif typ == tw.MSG_GAP:
+                g = tw.decode_gap(p)
+                self._gap(g.t_ns, g.reason, "controller", g.from_cycle, g.to_cycle, g.count,
+                          f"announced by the controller ({g.count} records)")
+                if g.count and g.reason in ("ring_overflow", "client_overflow"):
+                    self.expect = g.to_cycle + 1
+            elif typ == tw.MSG_QUEUES:
+                qu = tw.decode_queues(p)
+                self.ch[T_QUEUES].log(pb.QueueLevels(
+                    levels={k: lv for k, (lv, _c) in qu.levels.items()},
+                    capacity={k: c for k, (_lv, c) in qu.levels.items()}).SerializeToString(),
+                    log_time=qu.t_ns)
+            elif typ == MSG_REPLY:
+                nmsg -= 1
+                self._on_reply(p)
+            else:
+                nmsg -= 1  # unknown types are skipped (forward compatible)
+        self.last_t_ns = t_ns
+        self.res.cycles += cycles
+        self.res.messages += nmsg
+        if self.last_cycle is not None:
+            self.res.last_cycle = self.last_cycle
+
+    def run(self, duration: float | None = None, stop: threading.Event | None = None
+            ) -> RecordResult:
+        """Stream until duration (s, wall clock) elapses, stop is set, or
+        (reconnect=False) the stream ends. Reconnects like ``servoamp record``."""
+        stop = stop or threading.Event()
+        res = self.res
+        t0 = time.monotonic()
+        c0 = time.process_time()
+        deadline = t0 + duration if duration is not None else None
+        backoff = 0.05
+        ever = False
+        splitter = tw.FrameSplitter()
+        try:
+            while not stop.is_set():
+                now = time.monotonic()
+                if deadline is not None and now >= deadline:
+                    res.stopped_by = "duration"
+                    break
+                if self.sock is None:
+                    try:
+                        s = socket.create_connection((self.host, self.port), timeout=1.0)
+                        s.settimeout(0.1)
+                        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
+                        s.sendall(self.auth)
+                        with self.send_lock:
+                            self.sock = s
+                        splitter = tw.FrameSplitter()
+                        ever = True
+                        backoff = 0.05
+                    except OSError:
+                        if not ever and deadline is None and now - t0 > self.connect_timeout:
+                            raise ConnectionError(
+                                f"no telemetry at {self.host}:{self.port}") from None
+                        if ever and not self.reconnect:
+                            res.stopped_by = "eof"
+                            break
+                        wait = backoff if deadline is None else min(backoff,
+                                                                   max(0.0, deadline - now))
+                        stop.wait(wait)
+                        backoff = min(backoff * 2, self.max_backoff)
+                        continue
+                try:
+                    data = self.sock.recv(1 << 18)
+                except socket.timeout:
+                    continue
+                except OSError:
+                    data = b""
+                if not data:
+                    with self.send_lock:
+                        self.sock.close()
+                        self.sock = None
+                    self._fail_pending("connection to the controller lost")
+                    if not self.reconnect:
+                        res.stopped_by = "eof"
+                        break
+                    continue
+                splitter.feed(data)
+                self._process(splitter.buf, splitter.frames())
+                if self.on_progress is not None:
+                    self.on_progress(res)
+            else:
+                res.stopped_by = "stop"
+            if self.sock is None and ever and self.reconnect and not self.final_seen and \
+                    self.last_cycle is not None and res.stopped_by != "eof":
+                self._gap(self.last_t_ns, "reconnect", "recorder", self.last_cycle + 1, None,
+                          None, "connection lost; not re-established before the end")
+        finally:
+            res.wall_s = time.monotonic() - t0
+            res.cpu_s = time.process_time() - c0
+        return res
+
+    def _fail_pending(self, why: str) -> None:
+        with self.pending_lock:
+            for ev, slot in self.pending.values():
+                slot[:] = [-3, why]
+                ev.set()
+
+
+class _Listener(ServerListener):
+    """The WebSocket server's callbacks (called on the SDK's threads)."""
+
+    def __init__(self, b: Bridge) -> None:
+        self.b = b
+
+    def _status(self, msg: str) -> None:
+        if self.b.server is not None:
+            self.b.server.publish_status(msg, StatusLevel.Error)
+
+    def on_get_parameters(self, client: Any, param_names: list[str],
+                          request_id: str | None = None) -> list[Parameter]:
+        try:
+            ps = self.b.list_params()
+        except ParamError as e:
+            self._status(f"servoamp: parameters: {e}")
+            return []
+        return [fox_param(p.name, p.type, p.value) for p in ps.values()
+                if not param_names or p.name in param_names]
+
+    def on_set_parameters(self, client: Any, parameters: list[Parameter],
+                          request_id: str | None = None) -> list[Parameter]:
+        out: list[Parameter] = []
+        if not self.b.params:
+            try:
+                self.b.list_params()
+            except ParamError as e:
+                self._status(f"servoamp: parameters: {e}")
+                return []
+        for p in parameters:
+            info = self.b.params.get(p.name)
+            if info is None:
+                self._status(f"servoamp: no parameter {p.name!r}")
+                continue
+            v = p.get_value()
+            try:
+                if not isinstance(v, (int, float, str)) or isinstance(v, bool):
+                    raise ParamError(6, f"{p.name}: a number is needed, got {v!r}")
+                self.b.set_param(p.name, v)
+            except ParamError as e:
+                self._status(f"servoamp: param set {p.name} {v!s:.40}: refused: {e}")
+            out.append(fox_param(info.name, info.type, info.value))
+        return out
+
+    def on_parameters_subscribe(self, param_names: list[str]) -> None:
+        return None
+
+    def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
+        return None
