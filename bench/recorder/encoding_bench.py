@@ -124,7 +124,11 @@ def main() -> int:
     ap.add_argument("--port", type=int)
     ap.add_argument("--out", type=Path)
     ap.add_argument("--cpu", type=int)
+    ap.add_argument("--quick", action="store_true",
+                    help="tiny sizes (scripts/bench.sh --quick): 1000 cycles, 0.3 s trials, ramp top 8 kHz")
     args = ap.parse_args()
+    if args.quick:
+        args.cycles, args.seconds, args.top = 1000, 0.3, 8000
     if args.worker:
         print(json.dumps(worker(args.worker, args.port, args.out, args.cpu)))
         return 0
@@ -137,8 +141,9 @@ def main() -> int:
                  "load_avg_at_start": list(os.getloadavg())},
         "note": "shared 2-core host; recorder pinned to CPU 1, telem_feed to CPU 0 for the "
                 "rate ramp; both encodings measured in this run, alternating",
+        "benchmark": "recorder",
         "encodings": {e: {} for e in ENCODINGS},
-        "figures": {},
+        "figures": [],
     }
     axes_list = [int(a) for a in args.axes.split(",")]
     for axes in axes_list:
@@ -153,19 +158,23 @@ def main() -> int:
         for enc in ENCODINGS:
             res["encodings"][enc][str(axes)].update(max_rate(enc, axes, tmp, args.seconds,
                                                              args.top))
+    # the table's figures (bench/README.md): both encodings, then the
+    # after/before ratios measured in this run
+    kinds = (("bytes_per_cycle", "B", "lower"), ("cpu_ms_per_1000_cycles", "ms", "lower"),
+             ("max_rate_x_axes", "1/s", "higher"))
     for enc in ENCODINGS:
         for axes in axes_list:
             d = res["encodings"][enc][str(axes)]
-            for k in ("bytes_per_cycle", "cpu_ms_per_1000_cycles", "max_rate_x_axes"):
-                res["figures"][f"{enc}.{axes}_axes.{k}"] = d[k]
+            for k, unit, better in kinds:
+                res["figures"].append({"name": f"{enc}_{axes}_axes_{k}", "value": d[k], "unit": unit,
+                                       "better": better})
     for axes in axes_list:
         j, p = res["encodings"]["json_record"][str(axes)], res["encodings"]["protobuf_sdk"][str(axes)]
-        res["figures"][f"ratio.{axes}_axes.bytes_per_cycle"] = round(
-            p["bytes_per_cycle"] / j["bytes_per_cycle"], 3)
-        res["figures"][f"ratio.{axes}_axes.cpu_per_cycle"] = round(
-            p["cpu_ms_per_1000_cycles"] / j["cpu_ms_per_1000_cycles"], 3)
-        res["figures"][f"ratio.{axes}_axes.max_rate_x_axes"] = round(
-            p["max_rate_x_axes"] / j["max_rate_x_axes"], 3) if j["max_rate_x_axes"] else None
+        for k, _, better in kinds:
+            if j[k]:
+                res["figures"].append({
+                    "name": f"ratio_{axes}_axes_{k}", "value": round(p[k] / j[k], 3), "unit": "x",
+                    "better": better, "note": "protobuf_sdk / json_record, same run"})
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(res, indent=2) + "\n")
     print(f"{'figure':<44} {'json_record':>14} {'protobuf_sdk':>14}")

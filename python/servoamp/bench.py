@@ -84,12 +84,13 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           (),
           ("{python}", "bench/cycle/determinism_bench.py", "--json", "{json}"),
           ("--cycles", "300", "--runs", "quiet")),
-    Bench("recorder", "recording encodings: bytes/cycle, CPU per 1000 cycles, max rate x axes (issue 15)",
-          False, "not measured yet",
+    Bench("recorder", "recording encodings, JSON (servoamp record) vs protobuf (servoamp bridge, foxglove-sdk): "
+          "bytes/cycle, CPU per 1000 cycles, max rate x axes at 4 and 8 axes",
+          False, "about 2-3 min (one rate ramp per encoding and axis count)",
           (),
-          ("{python}", "bench/recorder/recorder_bench.py", "--json", "{json}"),
+          ("{python}", "bench/recorder/encoding_bench.py", "--json", "{json}"),
           ("--quick",),
-          needs="bench/recorder/recorder_bench.py"),
+          needs="bench/recorder/encoding_bench.py"),
 )}
 
 
