@@ -209,11 +209,12 @@ void link_cycle(uint32_t t_entry, uint32_t lat_ns)
 		cost.lat_max_ns = lat_ns;
 }
 
-static uint32_t rd_word(const volatile uint8_t *p, uint32_t i)
+/* Word i of a request payload: amp_lib's private copy of the request,
+ * already validated (never OCM, which Linux may rewrite at any time). */
+static uint32_t rd_word(const uint8_t *p, uint32_t i)
 {
-	const volatile uint32_t *w = (const volatile uint32_t *)(const volatile void *)p;
-
-	return w[i];
+	p += 4u * i;
+	return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
 }
 
 static uint32_t mean(uint64_t sum, uint32_t n)
@@ -272,26 +273,28 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		return SP_OK;
 	}
 	case SP_CMD_PARAM_SET_MANY: {
-		uint32_t cnt;
+		uint32_t cnt, ids[SP_SET_MANY_MAX], vals[SP_SET_MANY_MAX];
 
 		if (nw < 1u)
 			return SP_E_LENGTH;
 		cnt = rd_word(req->payload, 0);
 		if (cnt > SP_SET_MANY_MAX || nw != 1u + 2u * cnt)
 			return SP_E_LENGTH;
+		/* each pair read once; checked, then applied, from this copy */
 		for (uint32_t i = 0; i < cnt; i++) {
-			int32_t rc = app_param_check(rd_word(req->payload, 1u + 2u * i),
-						     rd_word(req->payload, 2u + 2u * i));
+			ids[i] = rd_word(req->payload, 1u + 2u * i);
+			vals[i] = rd_word(req->payload, 2u + 2u * i);
+		}
+		for (uint32_t i = 0; i < cnt; i++) {
+			int32_t rc = app_param_check(ids[i], vals[i]);
+
 			if (rc != SP_OK)
 				return rc;
 		}
 		for (uint32_t i = 0; i < cnt; i++) {
-			uint32_t id = rd_word(req->payload, 1u + 2u * i);
-			uint32_t v = rd_word(req->payload, 2u + 2u * i);
-
-			app_param_apply(id, v);
-			if (id == SP_P_wd_limit)
-				amp.wd.limit = v;
+			app_param_apply(ids[i], vals[i]);
+			if (ids[i] == SP_P_wd_limit)
+				amp.wd.limit = vals[i];
 		}
 		out[0] = cnt;
 		*len = 4;
