@@ -8,7 +8,7 @@
  *   ampctl [-s SOCKET] param get NAME|ID
  *   ampctl [-s SOCKET] param set NAME|ID VALUE
  *   ampctl [-s SOCKET] resume               leave SAFESTOP
- *   ampctl [-s SOCKET] debug hang|crash|fault|badparam|stack  make the firmware fail (tests)
+ *   ampctl [-s SOCKET] debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US  make the firmware fail (tests)
  *   ampctl [-s SOCKET] raw CMD NBYTES [WORD...]   raw mailbox request (tests)
  *   ampctl [-s SOCKET] run FILE.nc          run a G-code program (path as servod sees it)
  *   ampctl [-s SOCKET] stop                 decelerate along the path and hold
@@ -46,7 +46,7 @@ int main(int argc, char **argv)
 	}
 	if (i >= argc || !strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 		fprintf(stderr, "usage: ampctl [-s SOCKET] status | stats | param list | param get NAME |\n"
-				"              param set NAME VALUE | resume | debug hang|crash|fault|badparam|stack | raw CMD NBYTES [WORD...] |\n"
+				"              param set NAME VALUE | resume | debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US | raw CMD NBYTES [WORD...] |\n"
 				"              run FILE.nc | stop\n");
 		return SE_USAGE;
 	}
