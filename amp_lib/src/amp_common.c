@@ -11,7 +11,7 @@ uint32_t amp_crc32(uint32_t crc, const void *data, uint32_t len)
 		0xedb88320u, 0xf00f9344u, 0xd6d6a3e8u, 0xcb61b38cu,
 		0x9b64c2b0u, 0x86d3d2d4u, 0xa00ae278u, 0xbdbdf21cu,
 	};
-	const volatile uint8_t *p = data;
+	const uint8_t *p = data;	/* private memory only: never OCM */
 
 	crc = ~crc;
 	while (len--) {
@@ -177,14 +177,21 @@ static uint32_t frame_crc(const struct amp_frame_hdr *h, const void *payload)
 	return amp_crc32(amp_crc32(0, &c, sizeof(c)), payload, h->length);
 }
 
-int amp__frame_check(const struct amp_frame_hdr *h, const struct amp_frame *f,
-		     uint32_t epoch)
+int amp__frame_recv(struct amp_frame_hdr *h, void *payload, uint32_t cap,
+		    const struct amp_frame *f, uint32_t epoch)
 {
+	/* One copy of the header, then (its length checked on the copy) one
+	 * copy of the payload; the CRC is computed over the copies. The peer
+	 * may rewrite the frame in OCM at any moment: what is checked is
+	 * exactly what the caller gets, and OCM is never read again. */
+	amp__copy_in(h, &f->hdr, sizeof(*h));
 	if (h->magic != AMP_FRAME_MAGIC || h->version != AMP_OCM_VERSION ||
 	    h->epoch != epoch || h->length > AMP_MBOX_CAPACITY)
 		return AMP_E_PROTO;
-	AMP_PORT_CACHE_INVAL(f->payload, h->length);
-	return frame_crc(h, f->payload) == h->crc32 ? AMP_OK : AMP_E_PROTO;
+	if (h->length > cap)
+		return AMP_E_NOSPC;
+	amp__bytes_in(payload, f->payload, h->length);
+	return frame_crc(h, payload) == h->crc32 ? AMP_OK : AMP_E_PROTO;
 }
 
 void amp__frame_put(struct amp_frame *f, struct amp_frame_hdr *h,

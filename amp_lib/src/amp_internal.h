@@ -21,9 +21,13 @@ void amp__copy_out(void *ocm_dst, const void *src, uint32_t bytes);
 void amp__bytes_in(void *dst, const void *ocm_src, uint32_t len);
 void amp__bytes_out(void *ocm_dst, const void *src, uint32_t len);
 
-/* Validate a frame header copied from OCM; payload checked by CRC. */
-int amp__frame_check(const struct amp_frame_hdr *h, const struct amp_frame *f,
-		     uint32_t epoch);
+/*
+ * Receive a frame: copy its header into h and its payload into payload (cap
+ * bytes available) once each, and validate the copies (magic, version,
+ * epoch, length, CRC). AMP_OK, AMP_E_PROTO, or AMP_E_NOSPC (length > cap).
+ */
+int amp__frame_recv(struct amp_frame_hdr *h, void *payload, uint32_t cap,
+		    const struct amp_frame *f, uint32_t epoch);
 /* Write a frame (header + payload) to OCM; header fields in h. */
 void amp__frame_put(struct amp_frame *f, struct amp_frame_hdr *h,
 		    const void *payload);
@@ -62,9 +66,6 @@ uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed);
 int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
 		   uint32_t naxes_word, uint32_t pub, uint32_t last, uint32_t epoch,
 		   struct amp_rx_info *rx, struct amp_stats *st);
-
-/* CRC of a frame header (crc32 field taken as 0) and its payload. */
-uint32_t amp__frame_crc(const struct amp_frame_hdr *h, const void *payload);
 
 /* Wait until *word == value, at most timeout ticks. 0 or AMP_E_TIMEOUT. */
 int amp__wait_word(const uint32_t *word, uint32_t value, amp_ticks_t timeout);

@@ -135,7 +135,7 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	struct amp_rx_info tmp;
 	struct amp_cmd_record c = { 0 };
 	struct amp_ocm *o;
-	uint32_t seq, sem;
+	uint32_t seq, sem, attach;
 	int peer;
 
 	if (!l || !l->ocm || n_axes > AMP_MAX_AXES || (n_axes && !axes))
@@ -203,8 +203,9 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		l->wd.primed = 0;
 		return peer;
 	}
-	if (RD(&o->servo_line.attach_count) != l->servo_attach) {
-		l->servo_attach = RD(&o->servo_line.attach_count);
+	attach = RD(&o->servo_line.attach_count);	/* read once */
+	if (attach != l->servo_attach) {
+		l->servo_attach = attach;
 		l->wd.primed = 0;	/* a restarted servo gets a fresh watchdog */
 	}
 	if (amp_wd_feed(&l->wd, RD(&o->servo_line.heartbeat)) == AMP_E_STALLED)
@@ -267,19 +268,16 @@ int amp_linux_mbox_poll(struct amp_linux *l, struct amp_msg *resp)
 		rc = amp_linux_peer(l);
 		return rc != AMP_OK ? rc : AMP_E_BUSY;
 	}
-	/* 6. read and validate the response */
+	/* 6. read the response once, into the caller's buffer, and validate
+	 * the copy (nothing is taken from OCM after the check) */
 	l->mbox_pending = 0;
-	amp__copy_in(&h, &o->resp.hdr, sizeof(h));
-	rc = amp__frame_check(&h, &o->resp, l->epoch);
+	rc = amp__frame_recv(&h, resp->data, resp->capacity, &o->resp, l->epoch);
 	if (rc == AMP_OK && h.seq != l->mbox_seq)
 		rc = AMP_E_PROTO;
-	if (rc == AMP_OK && h.length > resp->capacity)
-		rc = AMP_E_NOSPC;
 	if (rc != AMP_OK) {
 		l->st.mbox_err++;
 		return rc;
 	}
-	amp__bytes_in(resp->data, o->resp.payload, h.length);
 	resp->command = h.command;
 	resp->status = h.status;
 	resp->length = h.length;

@@ -178,6 +178,7 @@ int amp_servo_mbox_poll(struct amp_servo *s, struct amp_mbox_req *req)
 {
 	struct amp_ocm *o = s->ocm;
 	struct amp_frame_hdr h;
+	int rc;
 
 	if (s->mbox_state)
 		return 0;	/* the request handed out is still unanswered */
@@ -185,11 +186,12 @@ int amp_servo_mbox_poll(struct amp_servo *s, struct amp_mbox_req *req)
 	AMP_PORT_CACHE_INVAL(&o->mbox_sem, 4u);
 	if (RD_ACQ(&o->mbox_sem.sem) != AMP_SEM_BUSY)
 		return 0;
-	/* 2. read the request, every field validated */
-	amp__copy_in(&h, &o->req.hdr, sizeof(h));
+	/* 2. read the request once into private memory, every field of the
+	 * copy validated; the application gets the copy */
+	rc = amp__frame_recv(&h, s->req_buf, sizeof(s->req_buf), &o->req, s->epoch);
 	s->mbox_seq = h.seq;
 	s->mbox_cmd = h.command;
-	if (amp__frame_check(&h, &o->req, s->epoch) != AMP_OK) {
+	if (rc != AMP_OK) {
 		s->st.mbox_err++;
 		mbox_answer(s, AMP_E_PROTO, 0, 0);
 		return AMP_E_PROTO;
@@ -198,7 +200,7 @@ int amp_servo_mbox_poll(struct amp_servo *s, struct amp_mbox_req *req)
 	s->st.mbox_ok++;
 	req->command = h.command;
 	req->length = h.length;
-	req->payload = o->req.payload;
+	req->payload = (const uint8_t *)s->req_buf;
 	return 1;
 }
 

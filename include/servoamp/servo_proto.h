@@ -64,6 +64,19 @@ enum sp_debug {
 	 * "SVC stack overflow" with CRSH, then as SP_DEBUG_CRASH. Refused
 	 * (SP_E_STATE) by a firmware built without the MMU (no guard). */
 	SP_DEBUG_STACK = 5u,
+	/* req {6, us}: every cycle handler busy-waits us microseconds more
+	 * (0..10000, 0 = off) in its control step, inside its measured cost
+	 * (a slow control law; only while attached to Linux). */
+	SP_DEBUG_SLOW = 6u,
+	/* Every cycle handler ends with its own interrupt pending again (set
+	 * at the GIC), as if its cost exceeded the period: handlers run back
+	 * to back and the background loop never runs again. */
+	SP_DEBUG_OVERLOAD = 7u,
+	/* An interrupt the firmware has no handler for starts firing: the
+	 * TTC counter used by neither cycle, in interval mode, its level
+	 * interrupt enabled, targeted at this core and never cleared (a level
+	 * storm from a misrouted or misconfigured source). */
+	SP_DEBUG_STRAY_IRQ = 8u,
 };
 
 /* Application error statuses (struct amp_msg.status), beside amp_lib's
@@ -76,6 +89,8 @@ enum sp_error {
 	SP_E_RANGE = -103,	/* value outside [min, max] (or NaN) */
 	SP_E_READONLY = -104,	/* parameter cannot be written */
 	SP_E_STATE = -105,	/* not possible in the current state */
+	SP_E_OVERLOAD = -106,	/* cycle_period_us shorter than the measured worst
+				 * handler cost allows (sp_period_fits); nothing applied */
 };
 
 /* ---- parameters ---------------------------------------------------------- */
@@ -139,6 +154,21 @@ struct sp_param_desc {
 	{ id, #name, type, unit, (double)(min), (double)(max), (double)(def), flags },
 #define SP_PARAM_TABLE_INIT { SP_PARAMS(SP_X_DESC) }
 
+/*
+ * The firmware accepts a new cycle_period_us only if its worst cycle
+ * handler cost measured so far (struct sp_status cycle_ticks_max, handler
+ * entry to feedback published, global-timer ticks of 10 ns), with a margin
+ * of one quarter, fits in the period: the rest is left to the background
+ * loop (mailbox, log, STOP) and to the entry latency. The value in force is
+ * always accepted again (parameter restore).
+ */
+#define SP_PERIOD_MARGIN_NUM 5u	/* worst cost x 5/4 <= period */
+#define SP_PERIOD_MARGIN_DEN 4u
+static inline int sp_period_fits(uint32_t period_us, uint32_t worst_ns)
+{
+	return (uint64_t)worst_ns * SP_PERIOD_MARGIN_NUM <= (uint64_t)period_us * 1000u * SP_PERIOD_MARGIN_DEN;
+}
+
 /* Largest request: SET_MANY with every parameter. */
 #define SP_SET_MANY_MAX SP_P_COUNT
 
@@ -174,6 +204,12 @@ struct sp_status {
 	 * bytes. An overflow faults on the guard page below it. */
 	uint32_t svc_stack_used;
 	uint32_t svc_stack_size;
+	/* Interrupts taken without a handler, how many of them were disabled
+	 * at the GIC distributor, and the ID of the last one disabled. */
+	uint32_t irq_unhandled;
+	uint32_t irq_disabled;
+	uint32_t irq_disabled_last;
+	uint32_t period_refused;	/* cycle_period_us values refused (SP_E_OVERLOAD) */
 };
 
 /* ---- periodic records ----------------------------------------------------- */

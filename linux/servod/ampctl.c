@@ -8,7 +8,7 @@
  *   ampctl [-s SOCKET] param get NAME|ID
  *   ampctl [-s SOCKET] param set NAME|ID VALUE
  *   ampctl [-s SOCKET] resume               leave SAFESTOP
- *   ampctl [-s SOCKET] debug hang|crash|fault|badparam|stack  make the firmware fail (tests)
+ *   ampctl [-s SOCKET] debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US  make the firmware fail (tests)
  *   ampctl [-s SOCKET] raw CMD NBYTES [WORD...]   raw mailbox request (tests)
  *   ampctl [-s SOCKET] run FILE.nc          run a G-code program (path as servod sees it)
  *   ampctl [-s SOCKET] stop                 decelerate along the path and hold
@@ -51,8 +51,10 @@ int main(int argc, char **argv)
 	}
 	if (i >= argc || !strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 		fprintf(stderr, "usage: ampctl [-s SOCKET] status | stats | param list | param get NAME |\n"
-				"              param set NAME VALUE | resume | debug hang|crash|fault|badparam|stack | raw CMD NBYTES [WORD...] |\n"
-				"              run FILE.nc | stop | -   (the request from standard input)\n");
+				"              param set NAME VALUE | resume | debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US |
+"
+				"              raw CMD NBYTES [WORD...] | run FILE.nc | stop | -   (the request from standard input)
+");
 		return SE_USAGE;
 	}
 	from_stdin = i == argc - 1 && !strcmp(argv[i], "-");

@@ -70,6 +70,8 @@ const char *sp_strerror(int32_t s)
 	case SP_E_RANGE: return "value out of range (SP_E_RANGE)";
 	case SP_E_READONLY: return "read-only parameter (SP_E_READONLY)";
 	case SP_E_STATE: return "not possible in this state (SP_E_STATE)";
+	case SP_E_OVERLOAD:
+		return "period too short for the servo's measured handler cost, nothing changed (SP_E_OVERLOAD)";
 	default: return amp_strerror(s);
 	}
 }
@@ -156,12 +158,36 @@ static int req_resume(struct servod *sd, struct out *o, int argc, char **argv, c
 }
 SERVOD_REQUEST("resume", req_resume);
 
-/* "debug hang|crash|fault|badparam|stack": the servo hangs, crashes, faults
- * and hangs, gives one out-of-range parameter answer, or overflows its SVC
- * stack into the guard page (a crash), on purpose (tests). */
+/* "debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US": the
+ * servo hangs, crashes, faults and hangs, gives one out-of-range parameter
+ * answer, overflows its SVC stack into the guard page (a crash), runs its
+ * cycle handlers back to back, gets a stray level interrupt, or takes US
+ * microseconds longer per cycle handler, on purpose (tests). */
 static int req_debug(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
 {
 	uint32_t w;
+
+	if (argc == 3 && !strcmp(argv[1], "slow")) {
+		uint32_t req[2] = { SP_DEBUG_SLOW, 0 };
+		char *end;
+		unsigned long us = strtoul(argv[2], &end, 10);
+		int32_t status;
+		int rc;
+
+		if (!*argv[2] || *end || us > 10000ul) {
+			snprintf(msg, n, "debug slow: microseconds 0..10000 expected");
+			return SE_USAGE;
+		}
+		req[1] = (uint32_t)us;
+		rc = mbox_request(sd, SP_CMD_DEBUG, req, sizeof(req), 0, 0, 0, &status, msg, n);
+		if (!rc && status) {
+			snprintf(msg, n, "%s: %s", argv[0], sp_strerror(status));
+			rc = SE_SERVO;
+		} else if (!rc) {
+			put(o, "%s: ok\n", argv[0]);
+		}
+		return rc;
+	}
 
 	if (argc == 2 && !strcmp(argv[1], "hang"))
 		w = SP_DEBUG_HANG;
@@ -173,8 +199,12 @@ static int req_debug(struct servod *sd, struct out *o, int argc, char **argv, ch
 		w = SP_DEBUG_BADPARAM;
 	else if (argc == 2 && !strcmp(argv[1], "stack"))
 		w = SP_DEBUG_STACK;
+	else if (argc == 2 && !strcmp(argv[1], "overload"))
+		w = SP_DEBUG_OVERLOAD;
+	else if (argc == 2 && !strcmp(argv[1], "stray-irq"))
+		w = SP_DEBUG_STRAY_IRQ;
 	else {
-		snprintf(msg, n, "usage: debug hang|crash|fault|badparam|stack");
+		snprintf(msg, n, "usage: debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US");
 		return SE_USAGE;
 	}
 	return simple_command(sd, o, argv[0], SP_CMD_DEBUG, w, 4, msg, n);

@@ -357,7 +357,7 @@ static int param_set(struct servod *sd, struct out *o, int id, const char *value
 		return rc;
 	if (status) {
 		snprintf(msg, n, "%s: %s", d->name, sp_strerror(status));
-		return status == SP_E_RANGE || status == SP_E_READONLY ? SE_VALUE : SE_SERVO;
+		return status == SP_E_RANGE || status == SP_E_READONLY || status == SP_E_OVERLOAD ? SE_VALUE : SE_SERVO;
 	}
 	rc = check_answer(sd, "set", id, len, resp, msg, n);
 	if (rc) {

@@ -145,6 +145,8 @@ static void put_servo(struct out *o, const struct sp_status *s)
 	put(o, "servo.tx_ticks.mean=%u\nservo.tx_ticks.max=%u\n", s->tx_ticks_mean, s->tx_ticks_max);
 	put(o, "servo.cycle_ticks.mean=%u\nservo.cycle_ticks.max=%u\n", s->cycle_ticks_mean, s->cycle_ticks_max);
 	put(o, "servo.svc_stack_used=%u\nservo.svc_stack_size=%u\n", s->svc_stack_used, s->svc_stack_size);
+	put(o, "servo.irq_unhandled=%u\nservo.irq_disabled=%u\nservo.irq_disabled_last=%u\nservo.period_refused=%u\n",
+	    s->irq_unhandled, s->irq_disabled, s->irq_disabled_last, s->period_refused);
 }
 
 static int req_stats(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)

@@ -20,6 +20,7 @@
 #define GICD_CTLR        0x000u
 #define GICD_ISENABLER   0x100u
 #define GICD_ICENABLER   0x180u
+#define GICD_ISPENDR     0x200u
 #define GICD_ICPENDR     0x280u
 #define GICD_IPRIORITYR  0x400u
 #define GICD_ITARGETSR   0x800u
@@ -89,6 +90,12 @@ void gic_irq_disable(uint32_t id)
 	mmio_write32(D(GICD_ICENABLER + 4u * (id / 32u)), 1u << (id & 31u));
 	dsb();
 	mmio_write32(D(GICD_ICPENDR + 4u * (id / 32u)), 1u << (id & 31u));
+	dsb();
+}
+
+void gic_irq_pend(uint32_t id)
+{
+	mmio_write32(D(GICD_ISPENDR + 4u * (id / 32u)), 1u << (id & 31u));
 	dsb();
 }
 

@@ -18,6 +18,7 @@ void gic_cpu_disable(void);
 void gic_irq_config(uint32_t id, uint32_t prio, int level);
 void gic_irq_enable(uint32_t id);
 void gic_irq_disable(uint32_t id);	/* also clears its pending state */
+void gic_irq_pend(uint32_t id);		/* set its pending state (ISPENDR) */
 uint32_t gic_ack(void);
 void gic_eoi(uint32_t iar);
 uint32_t gic_running_priority(void);

@@ -29,7 +29,7 @@ static struct irq_desc idt[IRQ_MAX_ID];
 static volatile uint32_t nest;
 static uint32_t nest_max;
 static uint32_t in_service[NEST_MAX];	/* IAR values, outermost first */
-static uint32_t spurious, unhandled;
+static uint32_t spurious, unhandled, disabled, disabled_last;
 
 void irq_init(void)
 {
@@ -37,7 +37,7 @@ void irq_init(void)
 		idt[i] = (struct irq_desc){ 0 };
 	nest = 0;
 	nest_max = 0;
-	spurious = unhandled = 0;
+	spurious = unhandled = disabled = disabled_last = 0;
 }
 
 int irq_register(uint32_t id, irq_handler_t handler, irq_clear_t clear,
@@ -136,6 +136,16 @@ uint32_t irq_unhandled(void)
 	return unhandled;
 }
 
+uint32_t irq_disabled(void)
+{
+	return disabled;
+}
+
+uint32_t irq_disabled_last(void)
+{
+	return disabled_last;
+}
+
 void irq_dispatch(void)
 {
 	uint32_t iar = gic_ack();
@@ -158,8 +168,16 @@ void irq_dispatch(void)
 		nest_max = depth;
 
 	if (!d || !d->registered) {
-		/* Not ours: count it and complete it; never reconfigure it. */
+		/* Not ours, yet routed to this core: count it, disable it at
+		 * the distributor (a level source nobody clears would storm
+		 * and starve everything below its priority), complete it.
+		 * SGIs cannot be disabled; they are edges and only counted. */
 		unhandled++;
+		if (id >= 16u) {
+			gic_irq_disable(id);
+			disabled++;
+			disabled_last = id;
+		}
 	} else {
 		if (d->trigger == IRQ_TRIGGER_EDGE && d->clear)
 			d->clear(d->arg);

@@ -16,6 +16,9 @@
  *   level: the handler with IRQs unmasked, then clear() (the line must be
  *          low before EOI or the GIC re-takes it at once);
  *   statistics -> nesting count -1 -> EOI.
+ * An interrupt taken without a registered handler (not ours, yet routed to
+ * this core) is counted, disabled at the distributor (PPI/SPI; SGIs only
+ * counted) and completed: a level source nobody clears cannot storm.
  * With IRQ_NESTING (default 1) the handler runs with IRQs unmasked; the
  * GIC's running priority lets only higher-priority interrupts (lower
  * value, other group under BPR) preempt it, so a handler never re-enters
@@ -54,7 +57,9 @@ void irq_get_stats(uint32_t id, struct irq_stats *st);
 uint32_t irq_nest_max(void);
 uint32_t irq_nest_now(void);
 uint32_t irq_spurious(void);
-uint32_t irq_unhandled(void);
+uint32_t irq_unhandled(void);		/* interrupts taken without a handler */
+uint32_t irq_disabled(void);		/* of those, disabled at the GIC distributor */
+uint32_t irq_disabled_last(void);	/* ID of the last one disabled (0: none) */
 
 void irq_dispatch(void);	/* called by irq_entry (start.S) */
 

@@ -33,10 +33,12 @@
 
 static volatile uint32_t local_hb;
 volatile struct link_diag link_diag;
+volatile struct link_debug link_debug;
 
 void link_init(void)
 {
 	local_hb = 0;
+	link_debug = (struct link_debug){ 0 };
 	log_printf("link: amp_lib servo side not linked; heartbeat kept locally\n");
 }
 
@@ -74,7 +76,9 @@ const char *link_backend(void)
 #include "amp/amp.h"
 #include "app.h"
 #include "arch.h"
+#include "gic.h"
 #include "gtimer.h"
+#include "irq.h"
 #include "link.h"
 #include "log.h"
 #include "mmu.h"
@@ -99,8 +103,11 @@ static struct {
 	uint32_t lat_max_ns;
 } cost;
 
+static uint32_t period_refused;	/* cycle_period_us values refused (check_load) */
+
 /* Diagnostics read by the tests through the QEMU monitor (symbol). */
 volatile struct link_diag link_diag;
+volatile struct link_debug link_debug;
 
 void link_init(void)
 {
@@ -112,6 +119,8 @@ void link_init(void)
 	amp = (struct amp_servo){ 0 };
 	cost = (__typeof__(cost)){ 0 };
 	link_diag = (struct link_diag){ 0 };
+	link_debug = (struct link_debug){ 0 };
+	period_refused = 0;
 	app_init();
 }
 
@@ -185,6 +194,12 @@ void link_cycle(uint32_t t_entry, uint32_t lat_ns)
 		amp_servo_set_state(&amp, AMP_SSTATE_SAFESTOP, app_fault());
 	if (app_in_safestop() && !link_diag.standstill_cycle && app_stop_cycles())
 		link_diag.standstill_cycle = link_diag.safestop_cycle + app_stop_cycles() - 1u;
+	if (link_debug.slow_us) {	/* debug: a slow control law */
+		uint32_t w = link_debug.slow_us * BOARD_GTIMER_TICKS_PER_US;
+
+		while (gtimer_now32() - t1 < w)
+			compiler_barrier();
+	}
 	t2 = gtimer_now32();
 	(void)amp_servo_cycle_tx(&amp, fb, n, t_entry, lat_ns / (1000u / AMP_BOARD_TICKS_PER_US));
 	t3 = gtimer_now32();
@@ -209,16 +224,35 @@ void link_cycle(uint32_t t_entry, uint32_t lat_ns)
 		cost.lat_max_ns = lat_ns;
 }
 
-static uint32_t rd_word(const volatile uint8_t *p, uint32_t i)
+/* Word i of a request payload: amp_lib's private copy of the request,
+ * already validated (never OCM, which Linux may rewrite at any time). */
+static uint32_t rd_word(const uint8_t *p, uint32_t i)
 {
-	const volatile uint32_t *w = (const volatile uint32_t *)(const volatile void *)p;
-
-	return w[i];
+	p += 4u * i;
+	return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
 }
 
 static uint32_t mean(uint64_t sum, uint32_t n)
 {
 	return n ? (uint32_t)(sum / n) : 0u;
+}
+
+/*
+ * A parameter value the cycle can sustain: a new cycle_period_us must hold
+ * the worst handler cost measured so far with its margin (sp_period_fits);
+ * the period in force is always accepted again. SP_OK or SP_E_OVERLOAD.
+ */
+static int32_t check_load(uint32_t id, uint32_t v)
+{
+	uint32_t worst_ns = cost.cyc_max * (1000u / AMP_BOARD_TICKS_PER_US);
+
+	if (id != SP_P_cycle_period_us || v == app_param(id) || sp_period_fits(v, worst_ns))
+		return SP_OK;
+	period_refused++;
+	log_printf("param: cycle_period_us %u refused: worst handler cost %u ns measured, %u/%u of it needed\n",
+		   (unsigned)v, (unsigned)worst_ns, (unsigned)SP_PERIOD_MARGIN_NUM,
+		   (unsigned)SP_PERIOD_MARGIN_DEN);
+	return SP_E_OVERLOAD;
 }
 
 /* Serve one request; returns the status, fills out/len. */
@@ -257,6 +291,8 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		id = rd_word(req->payload, 0);
 		v = rd_word(req->payload, 1);
 		rc = app_param_check(id, v);
+		if (rc == SP_OK)
+			rc = check_load(id, v);
 		if (rc != SP_OK)
 			return rc;
 		app_param_apply(id, v);
@@ -272,26 +308,30 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		return SP_OK;
 	}
 	case SP_CMD_PARAM_SET_MANY: {
-		uint32_t cnt;
+		uint32_t cnt, ids[SP_SET_MANY_MAX], vals[SP_SET_MANY_MAX];
 
 		if (nw < 1u)
 			return SP_E_LENGTH;
 		cnt = rd_word(req->payload, 0);
 		if (cnt > SP_SET_MANY_MAX || nw != 1u + 2u * cnt)
 			return SP_E_LENGTH;
+		/* each pair read once; checked, then applied, from this copy */
 		for (uint32_t i = 0; i < cnt; i++) {
-			int32_t rc = app_param_check(rd_word(req->payload, 1u + 2u * i),
-						     rd_word(req->payload, 2u + 2u * i));
+			ids[i] = rd_word(req->payload, 1u + 2u * i);
+			vals[i] = rd_word(req->payload, 2u + 2u * i);
+		}
+		for (uint32_t i = 0; i < cnt; i++) {
+			int32_t rc = app_param_check(ids[i], vals[i]);
+
+			if (rc == SP_OK)
+				rc = check_load(ids[i], vals[i]);
 			if (rc != SP_OK)
 				return rc;
 		}
 		for (uint32_t i = 0; i < cnt; i++) {
-			uint32_t id = rd_word(req->payload, 1u + 2u * i);
-			uint32_t v = rd_word(req->payload, 2u + 2u * i);
-
-			app_param_apply(id, v);
-			if (id == SP_P_wd_limit)
-				amp.wd.limit = v;
+			app_param_apply(ids[i], vals[i]);
+			if (ids[i] == SP_P_wd_limit)
+				amp.wd.limit = vals[i];
 		}
 		out[0] = cnt;
 		*len = 4;
@@ -336,6 +376,10 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		s.mbox_served = amp.st.mbox_ok;
 		s.svc_stack_used = svc_stack_used();
 		s.svc_stack_size = svc_stack_size();
+		s.irq_unhandled = irq_unhandled();
+		s.irq_disabled = irq_disabled();
+		s.irq_disabled_last = irq_disabled_last();
+		s.period_refused = period_refused;
 		for (uint32_t i = 0; i < sizeof(s) / 4u; i++)
 			out[i] = ((uint32_t *)&s)[i];
 		*len = sizeof(s);
@@ -351,10 +395,24 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 	case SP_CMD_DEBUG: {
 		uint32_t what;
 
-		if (nw != 1u)
+		if (nw < 1u)
 			return SP_E_LENGTH;
 		what = rd_word(req->payload, 0);
-		if (what == SP_DEBUG_HANG) {
+		if (nw != (what == SP_DEBUG_SLOW ? 2u : 1u))
+			return SP_E_LENGTH;
+		if (what == SP_DEBUG_SLOW) {
+			uint32_t us = rd_word(req->payload, 1);
+
+			if (us > 10000u)
+				return SP_E_RANGE;
+			log_printf("debug: every cycle handler now takes %u us longer\n", (unsigned)us);
+			link_debug.slow_us = us;
+		} else if (what == SP_DEBUG_OVERLOAD) {
+			log_printf("debug: overload requested: every cycle handler ends with its interrupt pending again\n");
+			link_debug.overload = 1;
+		} else if (what == SP_DEBUG_STRAY_IRQ) {
+			link_debug.stray_req = 1;	/* started by link_poll, after the answer */
+		} else if (what == SP_DEBUG_HANG) {
 			log_printf("debug: hang requested: cycle work and heartbeat stop, STOP still honoured\n");
 			hang = 1;
 		} else if (what == SP_DEBUG_CRASH) {
@@ -391,6 +449,15 @@ void link_poll(uint32_t cycle, const struct link_stats *ls)
 	if (crash_req) {
 		crash_req = 0;
 		__asm__ volatile(".inst 0xe7f000f0" ::: "memory");	/* udf #0 */
+	}
+	if (link_debug.stray_req == 1u) {
+		uint32_t id = ttc_stray_start();
+
+		log_printf("debug: stray interrupt %u (no handler here): level, this core, never cleared\n",
+			   (unsigned)id);
+		gic_irq_config(id, 0xc0u, 1);
+		gic_irq_enable(id);
+		link_debug.stray_req = 2;	/* started */
 	}
 	if (hang)
 		return;

@@ -21,6 +21,16 @@ struct link_diag {
 };
 extern volatile struct link_diag link_diag;
 
+/* Debug hooks (SP_CMD_DEBUG; the QEMU tests without Linux write them
+ * through the gdbstub by symbol). Cleared by link_init. */
+struct link_debug {
+	uint32_t slow_us;	/* SP_DEBUG_SLOW: extra busy time per cycle handler */
+	uint32_t overload;	/* SP_DEBUG_OVERLOAD: the cycle interrupt re-pends itself
+				 * (1 requested, 2 in effect) */
+	uint32_t stray_req;	/* SP_DEBUG_STRAY_IRQ: 1 requested, 2 started (background) */
+};
+extern volatile struct link_debug link_debug;
+
 void link_init(void);
 /* Main loop: attach / retry, mailbox service. */
 void link_poll(uint32_t cycle, const struct link_stats *ls);

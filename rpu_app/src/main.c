@@ -59,6 +59,8 @@ static uint32_t nest_test_latency(void *arg)
 	return (gtimer_now32() - sgi_stamp) * NS_PER_GT_TICK;
 }
 
+static int stop_requested(void);
+
 static void cycle_handler(void *arg)
 {
 	uint32_t now = gtimer_now32();
@@ -90,6 +92,13 @@ static void cycle_handler(void *arg)
 	period_changed = 0;
 	last_gt = fire;
 	cycles = c + 1u;
+	/* STOP is honoured here too, not only in the background loop: a core
+	 * whose cycle handlers run back to back (overloaded) or whose
+	 * background loop starves for any other reason still parks. */
+	if (stop_requested()) {
+		log_printf("stop: STOP seen in the cycle handler after %u cycles\n", (unsigned)(c + 1u));
+		servo_quiesce_and_park();
+	}
 	link_cycle(now, lat);
 
 	/* Nesting self-test, once per statistics interval: a higher-priority
@@ -105,6 +114,10 @@ static void cycle_handler(void *arg)
 			nest_ok++;
 		else
 			nest_fail++;
+	}
+	if (link_debug.overload) {	/* debug: as if this handler outlasted the period */
+		link_debug.overload = 2;	/* in effect */
+		gic_irq_pend(BOARD_CYCLE_IRQ);
 	}
 }
 
@@ -154,10 +167,11 @@ static void print_stats(void)
 		   (unsigned)irq_nest_max(), (unsigned)nest_ok, (unsigned)nest_fail);
 	print_irq_stats(BOARD_CYCLE_IRQ);
 	print_irq_stats(BOARD_NEST_TEST_SGI);
-	log_printf("stats link=%s attached=%d hb=%u spurious=%u unhandled=%u trace_wraps=%u "
-		   "uart_dropped=%u svc_stack_used=%u\n",
+	log_printf("stats link=%s attached=%d hb=%u spurious=%u unhandled=%u irq_disabled=%u "
+		   "irq_disabled_last=%u trace_wraps=%u uart_dropped=%u svc_stack_used=%u\n",
 		   link_backend(), link_attached(), (unsigned)link_heartbeat(),
-		   (unsigned)irq_spurious(), (unsigned)irq_unhandled(), (unsigned)ls.trace_wraps,
+		   (unsigned)irq_spurious(), (unsigned)irq_unhandled(), (unsigned)irq_disabled(),
+		   (unsigned)irq_disabled_last(), (unsigned)ls.trace_wraps,
 		   (unsigned)ls.uart_dropped,
 		   (unsigned)svc_stack_used());
 }

@@ -16,7 +16,11 @@ struct ttc_setting {
 int ttc_setting(uint32_t period_us, struct ttc_setting *s);
 /* (Re)program and start both counters; -1 if the period is unreachable. */
 int ttc_cycle_start(uint32_t period_us);
-void ttc_cycle_stop(void);
+void ttc_cycle_stop(void);	/* also stops the stray counter */
+/* Debug (SP_DEBUG_STRAY_IRQ): start the TTC counter used by neither cycle,
+ * interval mode, its interrupt enabled and never cleared here; returns its
+ * GIC ID. */
+uint32_t ttc_stray_start(void);
 uint32_t ttc_period_ns(void);
 /* IDT clear function: reads (clears) this core's counter interrupt register. */
 void ttc_cycle_clear(void *arg);

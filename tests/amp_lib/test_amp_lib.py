@@ -52,6 +52,17 @@ def test_unit(variant: str, request: pytest.FixtureRequest) -> None:
     assert " 0 failed" in out
 
 
+@pytest.mark.parametrize("variant", ["none", "asan", "tsan"])
+def test_hostile_peer_rewrites_ocm_between_reads(variant: str, request: pytest.FixtureRequest) -> None:
+    """Issue 13, finding 10: the peer rewrites a frame or record in OCM at an
+    exact point of the read (the posix port's load hook): nothing is accepted
+    whose CRC does not match the bytes the caller gets; the application gets
+    the validated copy, never OCM."""
+    build = request.getfixturevalue(f"build_{variant}")
+    out = _run([str(build / "test_amp_hostile")], timeout=60)
+    assert " 0 failed" in out
+
+
 @pytest.mark.slow
 def test_stress_two_processes_10m_cycles_1m_mailbox(build_none: Path) -> None:
     out = _run([str(build_none / "amp_stress"), "lockstep",

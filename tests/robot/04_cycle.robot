@@ -293,6 +293,37 @@ A Shorter Run At 250 Microseconds
     Log    250 us: ${r}[linux.cycles] Linux cycles, ${r}[servo.cycles] servo cycles, missed linux ${r}[linux.missed_irq] servo ${r}[servo.missed] (${rate} %)    console=True
     Should Be True    ${r}[linux.cycles] + ${r}[linux.missed_irq] >= 10000
 
+A Period The Servo Cannot Meet Is Refused
+    [Documentation]    Issue 13, item 11: the firmware takes a new
+    ...    cycle_period_us only if its worst measured handler cost, with a
+    ...    quarter margin, fits in it. `debug slow 600` makes every cycle
+    ...    handler 600 us longer (inside its measured cost): 500 us is then
+    ...    refused with SP_E_OVERLOAD, servod says so (exit 6) and nothing
+    ...    changes (the servo's period, servod's set, the exchange); the
+    ...    period in force is still accepted, a longer one that fits too.
+    ...    The next test restarts the firmware (its cost figures with it).
+    [Teardown]    Run Keywords    Ampctl    debug slow 0    AND    Ampctl    param set cycle_period_us 1000
+    Param Should Be    cycle_period_us    1000
+    ${a}=    Stats
+    ${out}=    Ampctl    debug slow 600
+    Should Contain    ${out}    debug: ok
+    Execute Shell Command    sleep 0.1
+    ${out}=    Ampctl    param set cycle_period_us 500    expected_rc=6
+    Should Contain    ${out}    SP_E_OVERLOAD
+    Param Should Be    cycle_period_us    1000
+    ${b}=    Stats
+    Should Be Equal As Integers    ${b}[servo.period_us]    1000
+    ${ref}=    Delta    ${a}    ${b}    servo.period_refused
+    Should Be Equal As Integers    ${ref}    1
+    Should Be True    ${b}[servo.cycle_ticks.max] * 10 * 5 > 500 * 1000 * 4    worst cost ${b}[servo.cycle_ticks.max] ticks
+    Ampctl    param set cycle_period_us 1000
+    Ampctl    param set cycle_period_us 2000
+    Ampctl    debug slow 0
+    Ampctl    param set cycle_period_us 1000
+    Param Should Be    cycle_period_us    1000
+    ${r}=    Exchange Window    1
+    Exchange Should Run    ${r}
+
 Stop And Start The Firmware While Servod Runs
     Execute Shell Command    echo stop > ${RPROC}/state
     Wait For Servod Log    servo went offline

@@ -53,7 +53,7 @@ class GdbRemote:
             raise ConnectionError("gdbstub closed the connection")
         return d
 
-    def send_packet(self, data: str):
+    def send_packet(self, data: str) -> None:
         cs = sum(data.encode()) & 0xFF
         pkt = f"${data}#{cs:02x}".encode()
         for _ in range(3):
@@ -86,11 +86,11 @@ class GdbRemote:
         return self._read_packet()
 
     # ---- execution control ------------------------------------------
-    def cont(self):
+    def cont(self) -> None:
         self.send_packet("c")
         self.running = True
 
-    def interrupt(self):
+    def interrupt(self) -> None:
         if not self.running:
             return
         self.s.sendall(b"\x03")
@@ -100,7 +100,7 @@ class GdbRemote:
         self.running = False
 
     # ---- memory and registers (VM must be stopped) -------------------
-    def select_cpu(self, cpu_index: int):
+    def select_cpu(self, cpu_index: int) -> None:
         r = self.command(f"Hg{cpu_index + 1:x}")
         if r != "OK":
             raise RuntimeError(f"Hg failed: {r}")
@@ -111,7 +111,7 @@ class GdbRemote:
             raise RuntimeError(f"read {addr:#x}: {r}")
         return bytes.fromhex(r)
 
-    def write_mem(self, addr: int, data: bytes):
+    def write_mem(self, addr: int, data: bytes) -> None:
         r = self.command(f"M{addr:x},{len(data):x}:{data.hex()}")
         if r != "OK":
             raise RuntimeError(f"write {addr:#x}: {r}")
@@ -119,7 +119,7 @@ class GdbRemote:
     def read32(self, addr: int) -> int:
         return int.from_bytes(self.read_mem(addr, 4), "little")
 
-    def write32(self, addr: int, value: int):
+    def write32(self, addr: int, value: int) -> None:
         self.write_mem(addr, value.to_bytes(4, "little"))
 
     def read_reg(self, n: int) -> int:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 import statistics
 import time
+from pathlib import Path
 
 import pytest
 from elftools.elf.elffile import ELFFile
@@ -23,12 +24,12 @@ STATS_RE = (r"^stats cycle=(\d+) guest_us=(\d+) period_min_ns=(\d+) period_max_n
 IRQ_RE = r"^stats irq={id} count=(\d+) lat_min_ns=(\d+) lat_mean_ns=(\d+) lat_max_ns=(\d+) nest_max=(\d+)$"
 
 
-def entry_of(elf_path):
+def entry_of(elf_path: Path) -> int:
     with open(elf_path, "rb") as f:
         return ELFFile(f).header.e_entry
 
 
-def park_range(build):
+def park_range(build: Path) -> tuple[int, int]:
     with open(build / "qemu-stub.elf", "rb") as f:
         for s in ELFFile(f).get_section_by_name(".symtab").iter_symbols():
             if s.name == "park_loop":
@@ -36,7 +37,7 @@ def park_range(build):
     raise KeyError("park_loop")
 
 
-def request_stop(q, cfg):
+def request_stop(q: QemuRpu, cfg: dict[str, int]) -> None:
     """What the Linux driver does: zero the boot register, then post STOP."""
     g = q.attach_gdb()
     g.interrupt()
@@ -46,7 +47,7 @@ def request_stop(q, cfg):
     g.cont()
 
 
-def request_start(q, cfg, entry):
+def request_start(q: QemuRpu, cfg: dict[str, int], entry: int) -> None:
     """Driver start from the parked state: clear STOP, write the entry to
     the boot register (the park loop polls it; sev is implicit in QEMU)."""
     g = q.attach_gdb()

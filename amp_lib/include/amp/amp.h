@@ -194,6 +194,8 @@ struct amp_servo {
 	struct amp_watchdog wd;
 	struct amp_stats st;
 	struct amp_cmd_record cmd;	/* last whole commands */
+	/* the request handed out: a private copy, validated (never OCM) */
+	uint32_t req_buf[AMP_MBOX_CAPACITY / 4u];
 };
 
 /*
@@ -221,11 +223,15 @@ int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_i
 int amp_servo_cycle_tx(struct amp_servo *s, const struct amp_fb_axis *axes,
 		       uint32_t n_axes, uint32_t t_cycle, uint32_t irq_latency);
 
-/* A request handed to the servo application (payload stays in OCM). */
+/*
+ * A request handed to the servo application. payload points to the copy
+ * in struct amp_servo that passed the checks (valid until the answer):
+ * the peer cannot change it after validation.
+ */
 struct amp_mbox_req {
 	uint32_t command;
 	uint32_t length;
-	const volatile uint8_t *payload;
+	const uint8_t *payload;
 };
 
 /*

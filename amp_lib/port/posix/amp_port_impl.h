@@ -9,10 +9,22 @@
 
 #include <stdint.h>
 
+#if defined(AMP_PORT_TEST_LOAD_HOOK)
+/*
+ * Test builds only (tests/amp_lib/test_amp_hostile.c): every load from the
+ * shared region goes through the test's hook, which sees the address and
+ * the value read and may play the hostile peer (rewrite other words right
+ * after this read), deterministically.
+ */
+uint32_t amp_port_test_load_hook(const uint32_t *p, uint32_t v);
+#define AMP_PORT_LOAD32(p)   amp_port_test_load_hook((p), __atomic_load_n((p), __ATOMIC_RELAXED))
+#define AMP_PORT_LOAD_ACQ(p) amp_port_test_load_hook((p), __atomic_load_n((p), __ATOMIC_ACQUIRE))
+#else
 #define AMP_PORT_LOAD32(p)     __atomic_load_n((p), __ATOMIC_RELAXED)
-#define AMP_PORT_STORE32(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
 /* Semaphore and publication words: acquire / release. */
 #define AMP_PORT_LOAD_ACQ(p)     __atomic_load_n((p), __ATOMIC_ACQUIRE)
+#endif
+#define AMP_PORT_STORE32(p, v) __atomic_store_n((p), (v), __ATOMIC_RELAXED)
 #define AMP_PORT_STORE_REL(p, v) __atomic_store_n((p), (v), __ATOMIC_RELEASE)
 #if defined(__SANITIZE_THREAD__)
 /* ThreadSanitizer does not model fences: use a locked RMW (a full barrier
