@@ -169,7 +169,7 @@ void amp__bytes_out(void *ocm_dst, const void *src, uint32_t len)
 	AMP_PORT_CACHE_CLEAN(ocm_dst, len);
 }
 
-static uint32_t frame_crc(const struct amp_frame_hdr *h, const void *payload)
+uint32_t amp__frame_crc(const struct amp_frame_hdr *h, const void *payload)
 {
 	struct amp_frame_hdr c = *h;
 
@@ -177,14 +177,21 @@ static uint32_t frame_crc(const struct amp_frame_hdr *h, const void *payload)
 	return amp_crc32(amp_crc32(0, &c, sizeof(c)), payload, h->length);
 }
 
-int amp__frame_check(const struct amp_frame_hdr *h, const struct amp_frame *f,
-		     uint32_t epoch)
+int amp__frame_hdr_check(const struct amp_frame_hdr *h, uint32_t epoch)
 {
 	if (h->magic != AMP_FRAME_MAGIC || h->version != AMP_OCM_VERSION ||
 	    h->epoch != epoch || h->length > AMP_MBOX_CAPACITY)
 		return AMP_E_PROTO;
+	return AMP_OK;
+}
+
+int amp__frame_check(const struct amp_frame_hdr *h, const struct amp_frame *f,
+		     uint32_t epoch)
+{
+	if (amp__frame_hdr_check(h, epoch) != AMP_OK)
+		return AMP_E_PROTO;
 	AMP_PORT_CACHE_INVAL(f->payload, h->length);
-	return frame_crc(h, f->payload) == h->crc32 ? AMP_OK : AMP_E_PROTO;
+	return amp__frame_crc(h, f->payload) == h->crc32 ? AMP_OK : AMP_E_PROTO;
 }
 
 void amp__frame_put(struct amp_frame *f, struct amp_frame_hdr *h,
@@ -192,7 +199,7 @@ void amp__frame_put(struct amp_frame *f, struct amp_frame_hdr *h,
 {
 	h->magic = AMP_FRAME_MAGIC;
 	h->version = AMP_OCM_VERSION;
-	h->crc32 = frame_crc(h, payload);
+	h->crc32 = amp__frame_crc(h, payload);
 	amp__bytes_out(f->payload, payload, h->length);
 	amp__copy_out(&f->hdr, h, sizeof(*h));
 }

@@ -21,7 +21,10 @@ void amp__copy_out(void *ocm_dst, const void *src, uint32_t bytes);
 void amp__bytes_in(void *dst, const void *ocm_src, uint32_t len);
 void amp__bytes_out(void *ocm_dst, const void *src, uint32_t len);
 
-/* Validate a frame header copied from OCM; payload checked by CRC. */
+/* Validate a frame header copied from OCM (magic, version, epoch, length). */
+int amp__frame_hdr_check(const struct amp_frame_hdr *h, uint32_t epoch);
+/* The same, and the payload in OCM checked by CRC (the payload is left in
+ * OCM: the servo hands it to its application where it is). */
 int amp__frame_check(const struct amp_frame_hdr *h, const struct amp_frame *f,
 		     uint32_t epoch);
 /* Write a frame (header + payload) to OCM; header fields in h. */

@@ -249,19 +249,27 @@ int amp_linux_mbox_poll(struct amp_linux *l, struct amp_msg *resp)
 		rc = amp_linux_peer(l);
 		return rc != AMP_OK ? rc : AMP_E_BUSY;
 	}
-	/* 6. read and validate the response */
+	/* 6. read and validate the response: the header and the payload are
+	 * copied out of OCM once, and the copies are checked and used (a
+	 * payload checked in OCM and copied afterwards could have changed in
+	 * between) */
 	l->mbox_pending = 0;
 	amp__copy_in(&h, &o->resp.hdr, sizeof(h));
-	rc = amp__frame_check(&h, &o->resp, l->epoch);
+	rc = amp__frame_hdr_check(&h, l->epoch);
 	if (rc == AMP_OK && h.seq != l->mbox_seq)
 		rc = AMP_E_PROTO;
-	if (rc == AMP_OK && h.length > resp->capacity)
-		rc = AMP_E_NOSPC;
+	if (rc == AMP_OK && h.length > resp->capacity)	/* whole, but too long? */
+		rc = amp__frame_check(&h, &o->resp, l->epoch) == AMP_OK ?
+			AMP_E_NOSPC : AMP_E_PROTO;
+	if (rc == AMP_OK) {
+		amp__bytes_in(resp->data, o->resp.payload, h.length);
+		if (amp__frame_crc(&h, resp->data) != h.crc32)
+			rc = AMP_E_PROTO;
+	}
 	if (rc != AMP_OK) {
 		l->st.mbox_err++;
 		return rc;
 	}
-	amp__bytes_in(resp->data, o->resp.payload, h.length);
 	resp->command = h.command;
 	resp->status = h.status;
 	resp->length = h.length;
