@@ -59,43 +59,20 @@
 /* OCM control word (driver-owned) and status word (firmware-owned) */
 #include "servoamp/rproc_words.h"
 
+/* the image checks, shared with the user-space fuzz harness */
+#include "zynq_servo_rproc_check.h"
+
 /* SLCR: CPU1 reset and clock stop, used only when a stop times out */
 #define ZSR_SLCR_A9_CPU_RST_CTRL	0x244
 #define ZSR_A9_RST1			BIT(1)
 #define ZSR_A9_CLKSTOP1			BIT(5)
-
-/* On-chip memory of the Zynq-7000, mapped high (0xfffc0000-0xffffffff) */
-#define ZSR_OCM_BASE		0xfffc0000ULL
-#define ZSR_OCM_END		0x100000000ULL	/* exclusive */
 
 #define ZSR_DEFAULT_START_TIMEOUT_MS	1000
 #define ZSR_DEFAULT_STOP_TIMEOUT_MS	500
 #define ZSR_POLL_US			100
 /* how long 'PRKD' may still take to appear after an SLCR reset */
 #define ZSR_RESET_CONFIRM_MS		50
-/* no servo firmware has more PT_LOAD segments (the overlap check is O(n^2)) */
-#define ZSR_MAX_LOAD_SEGMENTS		32
 #define ZSR_DEFAULT_FIRMWARE		"servoamp-rpu.elf"
-
-/**
- * struct zsr_region - a named physical address range [start, end)
- * @name: what the range is, for error messages
- * @start: first address
- * @end: first address after the range
- */
-struct zsr_region {
-	const char *name;
-	u64 start;
-	u64 end;
-};
-
-enum {
-	ZSR_OCM_STUB,
-	ZSR_OCM_MAILBOX,
-	ZSR_OCM_CONTROL,
-	ZSR_OCM_BOOT_REG,
-	ZSR_OCM_NUM,
-};
 
 /**
  * struct zynq_servo_rproc - state of one servo core
@@ -104,8 +81,7 @@ enum {
  * @ctrl: OCM control (offset 0) and status (offset 4) words
  * @boot: the CPU1 boot register (0xfffffff0)
  * @slcr: SLCR regmap for the CPU1 reset, or NULL when not described
- * @carveout: the reserved-memory region the firmware runs from
- * @ocm: OCM ranges the firmware must not load into, with their names
+ * @lim: the carveout and the OCM ranges, for the image checks
  * @park_addr: address of the CPU1 park loop
  * @start_timeout_ms: bound on the wait for 'RUN!' after a start
  * @stop_timeout_ms: bound on the wait for 'PRKD' after a stop request
@@ -118,41 +94,12 @@ struct zynq_servo_rproc {
 	void __iomem *ctrl;
 	void __iomem *boot;
 	struct regmap *slcr;
-	struct zsr_region carveout;
-	struct zsr_region ocm[ZSR_OCM_NUM];
+	struct zsr_image_limits lim;
 	u32 park_addr;
 	u32 start_timeout_ms;
 	u32 stop_timeout_ms;
 	bool cpu1_unconfirmed;
 };
-
-static bool zsr_overlaps(u64 start, u64 end, const struct zsr_region *r)
-{
-	return start < r->end && r->start < end;
-}
-
-/**
- * zsr_ocm_owner() - name the OCM area that a range overlaps
- * @zsr: the servo core
- * @start: first address of the range
- * @end: first address after the range
- *
- * Return: a description of the first driver-known OCM area overlapped by
- * [@start, @end), "on-chip memory" for any other OCM address, or NULL when
- * the range does not touch OCM at all.
- */
-static const char *zsr_ocm_owner(struct zynq_servo_rproc *zsr, u64 start,
-				 u64 end)
-{
-	const struct zsr_region ocm = { NULL, ZSR_OCM_BASE, ZSR_OCM_END };
-	int i;
-
-	for (i = 0; i < ZSR_OCM_NUM; i++)
-		if (zsr->ocm[i].end && zsr_overlaps(start, end, &zsr->ocm[i]))
-			return zsr->ocm[i].name;
-
-	return zsr_overlaps(start, end, &ocm) ? "on-chip memory" : NULL;
-}
 
 /**
  * zsr_reset_cpu1() - reset CPU1 through the SLCR after a failed stop
@@ -290,359 +237,14 @@ static int zsr_may_load(struct zynq_servo_rproc *zsr, const char *name,
 }
 
 /**
- * zsr_check_ehdr() - what the core's rproc_elf_sanity_check() leaves open
- * @zsr: the servo core
- * @name: the image name, for messages
- * @fw: an image that passed rproc_elf_sanity_check()
- *
- * Return: 0 for an ELF32 ARM executable whose program and section header
- * tables lie inside the file, -EINVAL otherwise.
- */
-static int zsr_check_ehdr(struct zynq_servo_rproc *zsr, const char *name,
-			  const struct firmware *fw)
-{
-	const struct elf32_hdr *ehdr = (const struct elf32_hdr *)fw->data;
-	struct device *dev = zsr->dev;
-	u64 off_end;
-
-	if (ehdr->e_ident[EI_CLASS] != ELFCLASS32) {
-		dev_err(dev, "%s: wrong ELF class %u, the Cortex-A9 servo core needs ELF32\n",
-			name, ehdr->e_ident[EI_CLASS]);
-		return -EINVAL;
-	}
-	if (ehdr->e_machine != EM_ARM) {
-		dev_err(dev, "%s: wrong machine %u, not EM_ARM (%u)\n",
-			name, ehdr->e_machine, EM_ARM);
-		return -EINVAL;
-	}
-	if (ehdr->e_type != ET_EXEC) {
-		dev_err(dev, "%s: ELF type %u is not an executable\n",
-			name, ehdr->e_type);
-		return -EINVAL;
-	}
-	if (ehdr->e_phentsize != sizeof(struct elf32_phdr)) {
-		dev_err(dev, "%s: program header entry size %u is not %zu\n",
-			name, ehdr->e_phentsize, sizeof(struct elf32_phdr));
-		return -EINVAL;
-	}
-	off_end = (u64)ehdr->e_phoff +
-		  (u64)ehdr->e_phnum * sizeof(struct elf32_phdr);
-	if (off_end > fw->size) {
-		dev_err(dev, "%s: truncated: program headers end at %llu, file has %zu bytes\n",
-			name, off_end, fw->size);
-		return -EINVAL;
-	}
-	if (!ehdr->e_shnum)
-		return 0;
-	if (ehdr->e_shentsize != sizeof(struct elf32_shdr) ||
-	    ehdr->e_shstrndx >= ehdr->e_shnum) {
-		dev_err(dev, "%s: malformed section header table\n", name);
-		return -EINVAL;
-	}
-	off_end = (u64)ehdr->e_shoff +
-		  (u64)ehdr->e_shnum * sizeof(struct elf32_shdr);
-	if (off_end > fw->size) {
-		dev_err(dev, "%s: truncated: section headers end at %llu, file has %zu bytes\n",
-			name, off_end, fw->size);
-		return -EINVAL;
-	}
-
-	return 0;
-}
-
-/**
- * zsr_check_segments() - every PT_LOAD segment inside the file and the
- * carveout, never in OCM, no two overlapping, the entry point in one
- * @zsr: the servo core
- * @name: the image name, for messages
- * @fw: an image that passed zsr_check_ehdr()
- *
- * rproc_elf_load_segments() loads each segment at its physical address, in
- * table order: overlapping segments would overwrite each other.
- *
- * Return: 0 if the segments can be loaded, -EINVAL otherwise.
- */
-static int zsr_check_segments(struct zynq_servo_rproc *zsr, const char *name,
-			      const struct firmware *fw)
-{
-	const struct elf32_hdr *ehdr = (const struct elf32_hdr *)fw->data;
-	const struct elf32_phdr *phdr, *prev;
-	struct device *dev = zsr->dev;
-	u64 start, end, off_end;
-	unsigned int loads = 0;
-	bool entry_ok = false;
-	const char *owner;
-	int i, j;
-
-	phdr = (const struct elf32_phdr *)(fw->data + ehdr->e_phoff);
-	for (i = 0; i < ehdr->e_phnum; i++) {
-		if (phdr[i].p_type != PT_LOAD || !phdr[i].p_memsz)
-			continue;
-		if (++loads > ZSR_MAX_LOAD_SEGMENTS) {
-			dev_err(dev, "%s: more than %u loadable segments\n",
-				name, ZSR_MAX_LOAD_SEGMENTS);
-			return -EINVAL;
-		}
-		if (phdr[i].p_filesz > phdr[i].p_memsz) {
-			dev_err(dev, "%s: segment %d: file size 0x%x larger than memory size 0x%x\n",
-				name, i, phdr[i].p_filesz, phdr[i].p_memsz);
-			return -EINVAL;
-		}
-		off_end = (u64)phdr[i].p_offset + phdr[i].p_filesz;
-		if (off_end > fw->size) {
-			dev_err(dev, "%s: truncated: segment %d needs bytes up to %llu, file has %zu\n",
-				name, i, off_end, fw->size);
-			return -EINVAL;
-		}
-		/* u64: a 32-bit address plus a 32-bit size cannot wrap */
-		start = phdr[i].p_paddr;
-		end = start + phdr[i].p_memsz;
-		owner = zsr_ocm_owner(zsr, start, end);
-		if (owner) {
-			dev_err(dev, "%s: segment %d [0x%llx-0x%llx) overlaps OCM (%s), which the firmware does not own\n",
-				name, i, start, end, owner);
-			return -EINVAL;
-		}
-		if (start < zsr->carveout.start || end > zsr->carveout.end) {
-			dev_err(dev, "%s: segment %d [0x%llx-0x%llx) is outside the carveout [0x%llx-0x%llx)\n",
-				name, i, start, end, zsr->carveout.start,
-				zsr->carveout.end);
-			return -EINVAL;
-		}
-		for (j = 0; j < i; j++) {
-			prev = &phdr[j];
-			if (prev->p_type != PT_LOAD || !prev->p_memsz ||
-			    start >= (u64)prev->p_paddr + prev->p_memsz ||
-			    prev->p_paddr >= end)
-				continue;
-			dev_err(dev, "%s: segments %d [0x%x-0x%llx) and %d [0x%llx-0x%llx) overlap\n",
-				name, j, prev->p_paddr,
-				(u64)prev->p_paddr + prev->p_memsz, i, start,
-				end);
-			return -EINVAL;
-		}
-		if (ehdr->e_entry >= start && ehdr->e_entry < end)
-			entry_ok = true;
-	}
-
-	if (!entry_ok) {
-		dev_err(dev, "%s: entry point 0x%x is not inside a loadable segment in the carveout\n",
-			name, ehdr->e_entry);
-		return -EINVAL;
-	}
-
-	return 0;
-}
-
-/**
- * zsr_check_section_names() - every section name inside the name table
- * @zsr: the servo core
- * @name: the image name, for messages
- * @fw: an image that passed zsr_check_ehdr()
- *
- * The core's find_table() strcmp()s the name of every section, at the name
- * table's file offset plus sh_name, with no bound: the name table must lie
- * inside the file and every name must start, and end with a NUL, inside it.
- *
- * Return: 0 if all names are bounded, -EINVAL otherwise.
- */
-static int zsr_check_section_names(struct zynq_servo_rproc *zsr,
-				   const char *name, const struct firmware *fw)
-{
-	const struct elf32_hdr *ehdr = (const struct elf32_hdr *)fw->data;
-	const struct elf32_shdr *shdr, *strtab;
-	struct device *dev = zsr->dev;
-	const char *names;
-	u64 end;
-	u32 off;
-	int i;
-
-	if (!ehdr->e_shnum)
-		return 0;
-
-	shdr = (const struct elf32_shdr *)(fw->data + ehdr->e_shoff);
-	strtab = &shdr[ehdr->e_shstrndx];
-	end = (u64)strtab->sh_offset + strtab->sh_size;
-	if (end > fw->size) {
-		dev_err(dev, "%s: section name table [0x%x-0x%llx) is outside the file (%zu bytes)\n",
-			name, strtab->sh_offset, end, fw->size);
-		return -EINVAL;
-	}
-	names = (const char *)fw->data + strtab->sh_offset;
-
-	for (i = 0; i < ehdr->e_shnum; i++) {
-		off = shdr[i].sh_name;
-		if (off >= strtab->sh_size) {
-			dev_err(dev, "%s: section %d: name offset 0x%x is outside the section name table (%u bytes)\n",
-				name, i, off, strtab->sh_size);
-			return -EINVAL;
-		}
-		if (!memchr(names + off, '\0', strtab->sh_size - off)) {
-			dev_err(dev, "%s: section %d: name at offset 0x%x is not NUL-terminated inside the section name table\n",
-				name, i, off);
-			return -EINVAL;
-		}
-	}
-
-	return 0;
-}
-
-/**
- * zsr_rsc_section() - the section the core takes as the resource table
- * @fw: an image that passed zsr_check_section_names()
- *
- * Return: the first section named ".resource_table", as find_table() picks
- * it, or NULL.
- */
-static const struct elf32_shdr *zsr_rsc_section(const struct firmware *fw)
-{
-	const struct elf32_hdr *ehdr = (const struct elf32_hdr *)fw->data;
-	const struct elf32_shdr *shdr;
-	const char *names;
-	int i;
-
-	if (!ehdr->e_shnum)
-		return NULL;
-
-	shdr = (const struct elf32_shdr *)(fw->data + ehdr->e_shoff);
-	names = (const char *)fw->data + shdr[ehdr->e_shstrndx].sh_offset;
-	for (i = 0; i < ehdr->e_shnum; i++)
-		if (!strcmp(names + shdr[i].sh_name, ".resource_table"))
-			return &shdr[i];
-
-	return NULL;
-}
-
-/**
- * zsr_in_carveout() - whether [@da, @da + @len) lies inside the carveout
- * @zsr: the servo core
- * @da: first device address
- * @len: length in bytes
- *
- * In u64, so that a @len near 4 GiB cannot wrap the sum (the core's
- * rproc_da_to_va() adds them in 32 bits).
- */
-static bool zsr_in_carveout(const struct zynq_servo_rproc *zsr, u32 da,
-			    u32 len)
-{
-	return da >= zsr->carveout.start &&
-	       (u64)da + len <= zsr->carveout.end;
-}
-
-struct zsr_rsc_check {
-	struct zynq_servo_rproc *zsr;
-	const char *name;
-};
-
-/* rsc_table_for_each_entry() callback: entries checked against the carveout */
-static int zsr_check_rsc_entry(u32 type, void *rsc, int offset, int avail,
-			       void *data)
-{
-	const struct zsr_rsc_check *c = data;
-	struct zynq_servo_rproc *zsr = c->zsr;
-	const struct fw_rsc_carveout *mem = rsc;
-	const struct fw_rsc_trace *trace = rsc;
-
-	switch (type) {
-	case RSC_TRACE:
-		if (avail < (int)sizeof(*trace)) {
-			dev_err(zsr->dev, "%s: trace entry at offset %d is truncated\n",
-				c->name, offset);
-			return -EINVAL;
-		}
-		if (!zsr_in_carveout(zsr, trace->da, trace->len)) {
-			dev_err(zsr->dev, "%s: trace buffer '%.32s' [0x%x +0x%x) is not inside the carveout [0x%llx-0x%llx)\n",
-				c->name, (const char *)trace->name, trace->da,
-				trace->len, zsr->carveout.start,
-				zsr->carveout.end);
-			return -EINVAL;
-		}
-		break;
-	case RSC_CARVEOUT:
-		if (avail < (int)sizeof(*mem)) {
-			dev_err(zsr->dev, "%s: carveout entry at offset %d is truncated\n",
-				c->name, offset);
-			return -EINVAL;
-		}
-		if (mem->da != (u32)FW_RSC_ADDR_ANY &&
-		    !zsr_in_carveout(zsr, mem->da, mem->len)) {
-			dev_err(zsr->dev, "%s: carveout entry '%.32s' [0x%x +0x%x) is not inside the carveout [0x%llx-0x%llx)\n",
-				c->name, (const char *)mem->name, mem->da,
-				mem->len, zsr->carveout.start,
-				zsr->carveout.end);
-			return -EINVAL;
-		}
-		break;
-	}
-
-	return 0;
-}
-
-/**
- * zsr_check_rsc_table() - the resource table and its entries fit the board
- * @zsr: the servo core
- * @name: the image name, for messages
- * @fw: the image
- * @sh: its .resource_table section
- *
- * The core checks the table's header when it reads it; the driver checks
- * first that it can walk the table, then that the table is loaded into the
- * carveout (the core copies it there before the start) and that every
- * trace buffer and carveout entry lies inside the carveout.
- *
- * Return: 0 if the table fits, -EINVAL otherwise.
- */
-static int zsr_check_rsc_table(struct zynq_servo_rproc *zsr, const char *name,
-			       const struct firmware *fw,
-			       const struct elf32_shdr *sh)
-{
-	struct zsr_rsc_check c = { zsr, name };
-	struct device *dev = zsr->dev;
-	struct resource_table *table;
-	u64 end;
-
-	end = (u64)sh->sh_offset + sh->sh_size;
-	if (end > fw->size) {
-		dev_err(dev, "%s: resource table [0x%x-0x%llx) is outside the file (%zu bytes)\n",
-			name, sh->sh_offset, end, fw->size);
-		return -EINVAL;
-	}
-	if (sh->sh_size < sizeof(*table)) {
-		dev_err(dev, "%s: resource table of %u bytes has no header\n",
-			name, sh->sh_size);
-		return -EINVAL;
-	}
-	/* rsc_table_for_each_entry() only reads through this pointer */
-	table = (struct resource_table *)(fw->data + sh->sh_offset);
-	if (struct_size(table, offset, table->num) > sh->sh_size) {
-		dev_err(dev, "%s: resource table lists %u entries, more than its %u bytes hold\n",
-			name, table->num, sh->sh_size);
-		return -EINVAL;
-	}
-	if (!zsr_in_carveout(zsr, sh->sh_addr, sh->sh_size)) {
-		dev_err(dev, "%s: resource table [0x%x-0x%llx) is outside the carveout [0x%llx-0x%llx)\n",
-			name, sh->sh_addr, (u64)sh->sh_addr + sh->sh_size,
-			zsr->carveout.start, zsr->carveout.end);
-		return -EINVAL;
-	}
-
-	return rsc_table_for_each_entry(table, sh->sh_size, dev,
-					zsr_check_rsc_entry, &c);
-}
-
-/**
  * zsr_sanity_check() - refuse any image the servo core cannot run
  * @rproc: the remote processor handle
  * @fw: the firmware image
  *
  * Nothing is loaded while a stop of CPU1 is unconfirmed. Then the core's
  * rproc_elf_sanity_check() (magic, class, endianness, a first look at the
- * header tables), then what is specific to this board: ELF32 ARM
- * executable, header tables inside the file, section names bounded by the
- * name table, PT_LOAD segments inside the file and the carveout, never in
- * OCM, not overlapping, the entry point in one of them, and the resource
- * table (if any) and its entries inside the carveout. Every refusal logs
- * the reason.
+ * header tables), then what is specific to this board: zsr_check_image()
+ * in zynq_servo_rproc_check.h. Every refusal logs the reason.
  *
  * Return: 0 if the image can be loaded, a negative error code otherwise.
  */
@@ -650,7 +252,6 @@ static int zsr_sanity_check(struct rproc *rproc, const struct firmware *fw)
 {
 	struct zynq_servo_rproc *zsr = rproc->priv;
 	const char *name = rproc->firmware;
-	const struct elf32_shdr *rsc;
 	int ret;
 
 	ret = zsr_may_load(zsr, name, true);
@@ -664,21 +265,7 @@ static int zsr_sanity_check(struct rproc *rproc, const struct firmware *fw)
 		return ret;
 	}
 
-	ret = zsr_check_ehdr(zsr, name, fw);
-	if (ret)
-		return ret;
-	ret = zsr_check_segments(zsr, name, fw);
-	if (ret)
-		return ret;
-	ret = zsr_check_section_names(zsr, name, fw);
-	if (ret)
-		return ret;
-
-	rsc = zsr_rsc_section(fw);
-	if (rsc)
-		return zsr_check_rsc_table(zsr, name, fw, rsc);
-
-	return 0;
+	return zsr_check_image(&zsr->lim, name, fw);
 }
 
 /* the core loads through here: never while CPU1 may still run a firmware */
@@ -749,9 +336,9 @@ static int zsr_parse_fw(struct rproc *rproc, const struct firmware *fw)
 	}
 
 	mem = rproc_mem_entry_init(zsr->dev, NULL,
-				   (dma_addr_t)zsr->carveout.start,
-				   zsr->carveout.end - zsr->carveout.start,
-				   (u32)zsr->carveout.start, zsr_mem_alloc,
+				   (dma_addr_t)zsr->lim.carveout.start,
+				   zsr->lim.carveout.end - zsr->lim.carveout.start,
+				   (u32)zsr->lim.carveout.start, zsr_mem_alloc,
 				   zsr_mem_release, "servo-carveout");
 	if (!mem)
 		return -ENOMEM;
@@ -885,14 +472,14 @@ static int zsr_of_init(struct zynq_servo_rproc *zsr,
 	zsr->ctrl = devm_ioremap_resource(dev, res);
 	if (IS_ERR(zsr->ctrl))
 		return PTR_ERR(zsr->ctrl);
-	zsr->ocm[ZSR_OCM_CONTROL] = (struct zsr_region) {
+	zsr->lim.ocm[ZSR_OCM_CONTROL] = (struct zsr_region) {
 		"control words", res->start, (u64)res->end + 1 };
 
 	res = platform_get_resource_byname(pdev, IORESOURCE_MEM, "boot");
 	zsr->boot = devm_ioremap_resource(dev, res);
 	if (IS_ERR(zsr->boot))
 		return PTR_ERR(zsr->boot);
-	zsr->ocm[ZSR_OCM_BOOT_REG] = (struct zsr_region) {
+	zsr->lim.ocm[ZSR_OCM_BOOT_REG] = (struct zsr_region) {
 		"CPU1 boot register", res->start, (u64)res->end + 1 };
 
 	mem_np = of_parse_phandle(np, "memory-region", 0);
@@ -908,7 +495,7 @@ static int zsr_of_init(struct zynq_servo_rproc *zsr,
 		return -EINVAL;
 	}
 	of_node_put(mem_np);
-	zsr->carveout = (struct zsr_region) {
+	zsr->lim.carveout = (struct zsr_region) {
 		"carveout", rmem->base, (u64)rmem->base + rmem->size };
 
 	if (of_property_read_u32(np, "servoamp,park-address", &zsr->park_addr) ||
@@ -917,14 +504,14 @@ static int zsr_of_init(struct zynq_servo_rproc *zsr,
 		return -EINVAL;
 	}
 	/* the boot stub page that holds the park loop */
-	zsr->ocm[ZSR_OCM_STUB] = (struct zsr_region) { "boot stub and park loop",
+	zsr->lim.ocm[ZSR_OCM_STUB] = (struct zsr_region) { "boot stub and park loop",
 		zsr->park_addr & ~0xfffULL, (zsr->park_addr & ~0xfffULL) + 0x1000 };
 
 	ret = zsr_of_region(zsr, "servoamp,ocm-mailbox",
-			    &zsr->ocm[ZSR_OCM_MAILBOX], false);
+			    &zsr->lim.ocm[ZSR_OCM_MAILBOX], false);
 	if (ret)
 		return ret;
-	zsr->ocm[ZSR_OCM_MAILBOX].name = "amp_lib mailbox";
+	zsr->lim.ocm[ZSR_OCM_MAILBOX].name = "amp_lib mailbox";
 
 	zsr->start_timeout_ms = ZSR_DEFAULT_START_TIMEOUT_MS;
 	of_property_read_u32(np, "servoamp,start-timeout-ms",
@@ -961,6 +548,7 @@ static int zsr_probe(struct platform_device *pdev)
 
 	zsr = rproc->priv;
 	zsr->dev = dev;
+	zsr->lim.dev = dev;
 	zsr->rproc = rproc;
 	rproc->auto_boot = false;
 	rproc_coredump_set_elf_info(rproc, ELFCLASS32, EM_ARM);
@@ -994,7 +582,7 @@ static int zsr_probe(struct platform_device *pdev)
 	}
 
 	dev_info(dev, "servo core CPU1: carveout [0x%llx-0x%llx), park loop 0x%08x, firmware %s\n",
-		 zsr->carveout.start, zsr->carveout.end, zsr->park_addr,
+		 zsr->lim.carveout.start, zsr->lim.carveout.end, zsr->park_addr,
 		 fw_name);
 	return 0;
 }

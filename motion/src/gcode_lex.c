@@ -63,16 +63,17 @@ static int parse_number(const char *s, size_t len, size_t *pos, double *out,
 		if (dot) {
 			frac += zeros + 1;
 			sig += (mant || d) ? zeros + 1 : 0;
-			while (zeros-- > 0)
-				mant *= 10;
-			zeros = 0;
 		} else if (mant || d) {
 			sig++;
 		}
+		/* before the zeros are multiplied in: 15 digits fit, more may
+		 * not (1.5000...0004 overflowed int64 here) */
 		if (sig > 15 || frac > 22) {
 			*why = "number has too many digits (at most 15 significant)";
 			return -1;
 		}
+		for (; zeros > 0; zeros--)
+			mant *= 10;
 		mant = mant * 10 + d;
 	}
 	if (ndig == 0) {

@@ -94,6 +94,10 @@ static const struct err_case err_cases[] = {
 	{ "G1 X1.2.3 F100", 1, 4, MOTION_E_NUMBER, "decimal" },
 	{ "G1 X F100", 1, 4, MOTION_E_NUMBER, "number" },
 	{ "G1 X1 F100\nG1 Y12345678901234567", 2, 4, MOTION_E_NUMBER, "digits" },
+	/* zeros between the digits of a fraction (found by tests/fuzz:
+	 * multiplied into the mantissa before the digit count was checked,
+	 * a signed int64 overflow) */
+	{ "G1 X1.50000000000000000004 F100", 1, 4, MOTION_E_NUMBER, "digits" },
 	{ "G0 G1 X1", 1, 4, MOTION_E_MODAL, "same modal group" },
 	{ "G90 G91", 1, 5, MOTION_E_MODAL, "same modal group" },
 	{ "G1 X1 X2 F100", 1, 7, MOTION_E_MODAL, "twice" },

@@ -80,9 +80,10 @@ def test_bindings_validate() -> None:
 def test_driver_checkpatch_clean() -> None:
     kdir = qemu.kernel_dir()
     script = qemu.kernel_source(kdir) / "scripts" / "checkpatch.pl"
-    res = subprocess.run([str(script), "--no-tree", "--strict", "-f", "zynq_servo_rproc.c"],
-                         cwd=REPO / "linux" / "remoteproc", capture_output=True, text=True)
-    assert "total: 0 errors, 0 warnings, 0 checks" in res.stdout, res.stdout
+    for src in ("zynq_servo_rproc.c", "zynq_servo_rproc_check.h"):
+        res = subprocess.run([str(script), "--no-tree", "--strict", "-f", src],
+                             cwd=REPO / "linux" / "remoteproc", capture_output=True, text=True)
+        assert "total: 0 errors, 0 warnings, 0 checks" in res.stdout, res.stdout
 
 
 def test_driver_builds_without_warnings(tmp_path: Path) -> None:

@@ -160,7 +160,10 @@ struct amp_msg {
 /*
  * Non-periodic request/response (the mailbox's 7 Linux steps), polling with
  * a timeout in port ticks. On AMP_OK, resp holds the validated answer
- * (resp->status is the servo's status). AMP_E_BUSY: the servo still owns
+ * (resp->status is the servo's status): the payload is copied out of OCM
+ * once and the CRC is checked on that copy, so what the caller gets is what
+ * was checked, whatever the servo writes meanwhile. On AMP_E_PROTO resp->data
+ * may hold a rejected copy. AMP_E_BUSY: the servo still owns
  * an earlier request (it timed out) and has not answered it yet.
  */
 int amp_linux_mbox_call(struct amp_linux *l, const struct amp_msg *req,
