@@ -51,10 +51,8 @@ int main(int argc, char **argv)
 	}
 	if (i >= argc || !strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 		fprintf(stderr, "usage: ampctl [-s SOCKET] status | stats | param list | param get NAME |\n"
-				"              param set NAME VALUE | resume | debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US |
-"
-				"              raw CMD NBYTES [WORD...] | run FILE.nc | stop | -   (the request from standard input)
-");
+				"              param set NAME VALUE | resume | debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US |\n"
+				"              raw CMD NBYTES [WORD...] | run FILE.nc | stop | -   (the request from standard input)\n");
 		return SE_USAGE;
 	}
 	from_stdin = i == argc - 1 && !strcmp(argv[i], "-");
