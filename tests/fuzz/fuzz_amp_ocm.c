@@ -303,7 +303,6 @@ static void op_servo_poll(struct in *in)
 {
 	struct amp_mbox_req req;
 	uint8_t answer[AMP_MBOX_CAPACITY];
-	const volatile uint8_t *lo = ocm.req.payload;
 	int rc = amp_servo_mbox_poll(&s, &req);
 
 	FZ_ASSERT(rc == 0 || rc == 1 || rc == AMP_E_PROTO);
@@ -311,9 +310,10 @@ static void op_servo_poll(struct in *in)
 		uint32_t len;
 
 		FZ_ASSERT(req.length <= AMP_MBOX_CAPACITY);
-		FZ_ASSERT(req.payload == lo);
+		/* the validated private copy, never the payload in OCM */
+		FZ_ASSERT(req.payload == (const volatile uint8_t *)s.req_buf);
 		FZ_ASSERT(s.mbox_state == 1);
-		/* what the application does: read the payload where it is */
+		/* what the application does: read the payload it was handed */
 		for (uint32_t i = 0; i < req.length; i++)
 			answer[i] = req.payload[i];
 		len = u16(in) % (AMP_MBOX_CAPACITY + 1u);

@@ -17,9 +17,11 @@
  * sent: the client is authenticated exactly when its first frame is a
  * whole AUTH frame (type 8, flags 0, length <= 64) carrying the token (any
  * payload without a token); a wrong or malformed AUTH closes it
- * (auth_failed +1), more than CLIENT_AFTER_MAX bytes after the AUTH close
- * it (protocol +1), an unfinished AUTH leaves it waiting, an end of stream
- * closes it; an authenticated client has exactly the HELLO queued.
+ * (auth_failed +1); after the AUTH only REQUEST frames (type 9, flags 0,
+ * length 4..4 + TELEM_REQ_MAX) may follow, any other header closes it
+ * (protocol +1); an unfinished frame leaves it waiting, an end of stream
+ * closes it; an authenticated client has the HELLO queued and one answer
+ * per complete REQUEST (this server serves none: "no requests served").
  */
 #include "../../linux/telemetry/telem.c"
 
@@ -97,14 +99,21 @@ static void send_all(int fd, const uint8_t *p, size_t n)
 }
 
 /* What the server must have concluded from the bytes sent. */
-enum verdict { V_WAITING, V_AUTHED, V_BAD_AUTH, V_FLOOD };
+enum verdict { V_WAITING, V_AUTHED, V_BAD_AUTH, V_PROTOCOL };
 
-static enum verdict expected(const uint8_t *s, size_t n, int token, size_t *after)
+/* The answer the server (no request service here) queues at once for a
+ * complete REQUEST. */
+#define FZ_UNSERVED "no requests served"
+#define FZ_REPLY_LEN (FRAME_HDR + REPLY_HDR + sizeof(FZ_UNSERVED) - 1u)
+
+static enum verdict expected(const uint8_t *s, size_t n, int token, size_t *partial, size_t *requests)
 {
 	uint16_t type, flags;
 	uint32_t len;
+	size_t pos;
 
-	*after = 0;
+	*partial = n;
+	*requests = 0;
 	if (n < FRAME_HDR)
 		return V_WAITING;
 	memcpy(&type, s, 2);
@@ -116,8 +125,19 @@ static enum verdict expected(const uint8_t *s, size_t n, int token, size_t *afte
 		return V_WAITING;
 	if (token && (len != strlen(fz_token) || memcmp(s + FRAME_HDR, fz_token, len)))
 		return V_BAD_AUTH;
-	*after = n - FRAME_HDR - len;
-	return *after > CLIENT_AFTER_MAX ? V_FLOOD : V_AUTHED;
+	/* then REQUEST frames only: a header that is not one closes the client */
+	for (pos = FRAME_HDR + len; n - pos >= FRAME_HDR; pos += FRAME_HDR + len) {
+		memcpy(&type, s + pos, 2);
+		memcpy(&flags, s + pos + 2, 2);
+		memcpy(&len, s + pos + 4, 4);
+		if (type != TELEM_MSG_REQUEST || flags || len < 4u || len > 4u + TELEM_REQ_MAX)
+			return V_PROTOCOL;
+		if (n - pos < FRAME_HDR + len)
+			break;
+		(*requests)++;
+	}
+	*partial = n - pos;
+	return V_AUTHED;
 }
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -127,7 +147,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	struct telem *t = &servers[flags & 1u];
 	struct telem_client *c = &t->clients[0];
 	uint64_t failed0 = t->drop_auth_failed, proto0 = t->drop_protocol;
-	size_t at = 1, n_sent = 0, after;
+	size_t at = 1, n_sent = 0, partial, requests;
 	enum verdict v;
 	int sv[2];
 
@@ -161,17 +181,21 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		n_sent += sizeof(junk);
 		serve(t, c, sv[0]);
 	}
-	v = expected(sent, n_sent, flags & 1u, &after);
+	v = expected(sent, n_sent, flags & 1u, &partial, &requests);
 	if (at < size)	/* closed before everything was sent: the verdict came early */
-		FZ_ASSERT(v == V_BAD_AUTH || v == V_FLOOD);
+		FZ_ASSERT(v == V_BAD_AUTH || v == V_PROTOCOL);
 	switch (v) {
 	case V_WAITING:
 		FZ_ASSERT(c->fd >= 0 && !c->authed && c->in_len == n_sent);
 		FZ_ASSERT(t->drop_auth_failed == failed0 && t->drop_protocol == proto0);
 		break;
 	case V_AUTHED:
-		FZ_ASSERT(c->fd >= 0 && c->authed && c->rx_after == after);
-		FZ_ASSERT(c->off == 0 && c->len == FRAME_HDR + HELLO_LEN);
+		/* the HELLO, then one immediate answer per complete REQUEST
+		 * (or, with the buffer full, one lost event) */
+		FZ_ASSERT(c->fd >= 0 && c->authed && c->in_len == partial);
+		FZ_ASSERT(c->off == 0 && c->len >= FRAME_HDR + HELLO_LEN);
+		FZ_ASSERT((c->len - FRAME_HDR - HELLO_LEN) % FZ_REPLY_LEN == 0);
+		FZ_ASSERT((c->len - FRAME_HDR - HELLO_LEN) / FZ_REPLY_LEN + c->events_lost == requests);
 		FZ_ASSERT(t->clients_now == 1);
 		FZ_ASSERT(t->drop_auth_failed == failed0 && t->drop_protocol == proto0);
 		break;
@@ -179,7 +203,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 		FZ_ASSERT(c->fd < 0 && t->drop_auth_failed == failed0 + 1u);
 		FZ_ASSERT(t->drop_protocol == proto0);
 		break;
-	case V_FLOOD:
+	case V_PROTOCOL:
 		FZ_ASSERT(c->fd < 0 && t->drop_protocol == proto0 + 1u);
 		FZ_ASSERT(t->drop_auth_failed == failed0);
 		break;

@@ -31,6 +31,9 @@ FUZZ = Path(__file__).resolve().parent
 TOP = FUZZ.parents[1]
 BUILD = TOP / "build" / "fuzz"
 NAMES = ("amp_ocm", "gcode", "telem_client", "rproc_check")
+# The Python harness (Hypothesis) of the telemetry decoder, splitter and
+# recorder session: tests/fuzz/fuzz_telemetry.py, run by the campaign too.
+PY_NAMES = ("telemetry_py",)
 REGRESSION = FUZZ / "regression"
 
 # libFuzzer options per harness: the longest input worth trying (the
@@ -205,9 +208,35 @@ def replay(name: str) -> subprocess.CompletedProcess[str]:
                           errors="replace", timeout=300)
 
 
+_PY_LINE = re.compile(r"telemetry fuzz (\w+): (\d+) executions in (\d+) s \((\d+)/s\), (\d+) findings")
+
+
+def run_python(seconds: int) -> Result:
+    """tests/fuzz/fuzz_telemetry.py for `seconds` in all (its three targets)."""
+    t0 = time.monotonic()
+    p = subprocess.run([sys.executable, str(FUZZ / "fuzz_telemetry.py"), "--seconds", str(seconds)],
+                       capture_output=True, text=True, errors="replace", timeout=seconds * 3 + 300)
+    res = Result("telemetry_py", time.monotonic() - t0, rc=p.returncode, log=p.stdout + p.stderr)
+    for m in _PY_LINE.finditer(p.stdout):
+        res.execs += int(m.group(2))
+        if int(m.group(5)):
+            res.findings.append(f"{m.group(1)}: {m.group(5)}")
+    res.exec_per_s = int(res.execs / res.seconds) if res.seconds else 0
+    if p.returncode and not res.findings:
+        res.findings.append(f"exit {p.returncode}")
+    return res
+
+
 def campaign(seconds: int, names: tuple[str, ...]) -> list[Result]:
-    build(names)
     results = []
+    for name in names:
+        if name in PY_NAMES:
+            results.append(run_python(seconds))
+            print(f"{name}: {results[-1].execs} executions in {results[-1].seconds:.0f} s, "
+                  f"{len(results[-1].findings)} findings", file=sys.stderr, flush=True)
+    names = tuple(n for n in names if n not in PY_NAMES)
+    if names:
+        build(names)
     for name in names:  # one at a time: the machine is shared
         res = run(name, BUILD / "corpus" / name, seeds(name), BUILD / "findings" / name,
                   seconds=seconds)
@@ -237,12 +266,13 @@ def main(argv: list[str]) -> int:
     c = sub.add_parser("campaign", help="run the harnesses one after the other")
     c.add_argument("--seconds", type=int, default=300, help="per harness (default 300)")
     c.add_argument("names", nargs="*", metavar="NAME",
-                   help=f"harnesses (default all: {' '.join(NAMES)})")
+                   help=f"harnesses (default all: {' '.join(NAMES + PY_NAMES)})")
     args = ap.parse_args(argv)
-    unknown = [n for n in args.names if n not in NAMES]
+    known = NAMES + PY_NAMES
+    unknown = [n for n in args.names if n not in known]
     if unknown:
-        ap.error(f"unknown harness {', '.join(unknown)} (known: {' '.join(NAMES)})")
-    names = tuple(args.names) or NAMES
+        ap.error(f"unknown harness {', '.join(unknown)} (known: {' '.join(known)})")
+    names = tuple(args.names) or known
     results = campaign(args.seconds, names)
     print(table(results))
     out = BUILD / "campaign.json"
