@@ -145,7 +145,7 @@ def mutated(draw: st.DrawFn, base: st.SearchStrategy[bytes] = VALID) -> bytes:
             b[i:i] = draw(st.binary(min_size=1, max_size=16))
         elif kind == 4 and len(b) >= 8:  # the frame header's length word
             struct.pack_into("<I", b, 4, draw(st.sampled_from(INTERESTING_U32
-                                                              + [len(b) - 8 - 1])))
+                                                              + [max(0, len(b) - 8 - 1)])))
         elif kind == 5 and b:    # NaN/inf into an f64-sized slot
             i = draw(st.integers(0, max(0, len(b) - 8)))
             b[i:i + 8] = struct.pack("<d", draw(st.sampled_from(

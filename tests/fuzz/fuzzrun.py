@@ -224,6 +224,8 @@ def run_python(seconds: int) -> Result:
     res.exec_per_s = int(res.execs / res.seconds) if res.seconds else 0
     if p.returncode and not res.findings:
         res.findings.append(f"exit {p.returncode}")
+    if res.findings:  # the shrunk inputs and what they raised, as the harness printed them
+        print(p.stdout[-6000:], file=sys.stderr)
     return res
 
 
