@@ -305,25 +305,10 @@ class Bridge:
                 "time_base": "controller CLOCK_MONOTONIC (ns)", "encoding": "protobuf"})
 
     def _cycle_discontinuity(self, cyc: int, t_ns: int) -> None:
-        pr = self.pending_reconnect
-        if pr is not None:
-            self.pending_reconnect = None
-            last, new_session = pr
-            if last is None:
-                pass
-            elif new_session:
-                self._gap(t_ns, "producer_restart", "recorder", last + 1,
-                          cyc - 1 if cyc > last else None, None,
-                          "telemetry producer restarted (new session); cycles in between "
-                          "were not received")
-            else:
-                self._gap(t_ns, "reconnect", "recorder", last + 1, cyc - 1,
-                          cyc - last - 1 if cyc > last else None,
-                          "connection lost and re-established")
-        elif self.expect is not None:
-            self._gap(t_ns, "other", "recorder", self.expect, cyc - 1,
-                      cyc - self.expect if cyc > self.expect else None,
-                      "cycle counter discontinuity not announced by the controller")
+        g = tw.receiver_gap(self.pending_reconnect, self.expect, cyc)
+        self.pending_reconnect = None
+        if g is not None:
+            self._gap(t_ns, g[0], "recorder", *g[1:])
 
     def _process(self, buf: bytearray, frames: Any) -> None:
         log_cycle = self.ch[T_CYCLE].log

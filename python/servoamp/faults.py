@@ -144,6 +144,18 @@ def _delta(a: dict[str, str], b: dict[str, str], key: str) -> int:
 
 
 # -- the faults ------------------------------------------------------------------------
+
+def _stall_seen(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
+    """After a fault that stops the servo's heartbeat: Linux's watchdog."""
+    c.sh(f"sleep {SETTLE_S}")
+    after = c.stats()
+    st = _delta(before, after, "linux.stalls")
+    o.detected_by = f"Linux: heartbeat still, stall after {after.get('linux.last_stall_cycles')} cycles" \
+        if st else "not detected"
+    o.cycles = str(after.get("linux.last_stall_cycles")) if st else "-"
+    o.axes_stopped = "firmware restarted" if _delta(before, after, "linux.recoveries") else "no"
+
+
 # Each takes the campaign and the outcome to fill; stats before the fault
 # are taken by run_one, which also checks recovery and crashes after it.
 
@@ -244,12 +256,7 @@ def f_servo_irq_short(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
 def f_servo_irq_long(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
     reg_off, bit = enable_reg(GICD_ICENABLER, SERVO_IRQ)
     c.sh(f"devmem 0x{reg_off:08x} 32 0x{bit:x}")
-    c.sh(f"sleep {SETTLE_S}")
-    after = c.stats()
-    st = _delta(before, after, "linux.stalls")
-    o.detected_by = f"Linux: heartbeat still, stall after {after.get('linux.last_stall_cycles')} cycles" if st else "not detected"
-    o.cycles = str(after.get("linux.last_stall_cycles")) if st else "-"
-    o.axes_stopped = "firmware restarted" if _delta(before, after, "linux.recoveries") else "no"
+    _stall_seen(c, o, before)
 
 
 def f_linux_irq(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
@@ -267,12 +274,7 @@ def f_linux_irq(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
 
 def f_hang(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
     c.sh("ampctl debug hang")
-    c.sh(f"sleep {SETTLE_S}")
-    after = c.stats()
-    st = _delta(before, after, "linux.stalls")
-    o.detected_by = f"Linux: heartbeat still, stall after {after.get('linux.last_stall_cycles')} cycles" if st else "not detected"
-    o.cycles = str(after.get("linux.last_stall_cycles")) if st else "-"
-    o.axes_stopped = "firmware restarted" if _delta(before, after, "linux.recoveries") else "no"
+    _stall_seen(c, o, before)
 
 
 @dataclass(frozen=True)

@@ -139,25 +139,11 @@ class _Session:
     def on_cycle_batch_start(self, cyc: int, t_ns: int) -> None:
         """Continuity checks before the first cycle of a connection or after a hole."""
         pr = self.pending_reconnect
-        if pr is not None:
-            self.pending_reconnect = None
-            last, _last_t, new_session = pr
-            if last is None:
-                pass
-            elif new_session:
-                self.gap(t_ns, "producer_restart", "recorder", last + 1,
-                         cyc - 1 if cyc > last else None, None,
-                         "telemetry producer restarted (new session); cycles in between "
-                         "were not received")
-            else:
-                lost = cyc - last - 1 if cyc > last else None
-                self.gap(t_ns, "reconnect", "recorder", last + 1, cyc - 1, lost,
-                         "connection lost and re-established")
-            self.expect = cyc
-        elif self.expect is not None and cyc != self.expect:
-            lost = cyc - self.expect if cyc > self.expect else None
-            self.gap(t_ns, "other", "recorder", self.expect, cyc - 1, lost,
-                     "cycle counter discontinuity not announced by the controller")
+        self.pending_reconnect = None
+        g = tw.receiver_gap((pr[0], pr[2]) if pr is not None else None, self.expect, cyc)
+        if g is not None:
+            self.gap(t_ns, g[0], "recorder", *g[1:])
+        if pr is not None or g is not None:
             self.expect = cyc
 
     def on_gap(self, g: tw.Gap) -> None:

@@ -353,3 +353,27 @@ def encode_queues(t_ns: int, levels: dict[str, tuple[int, int]]) -> bytes:
     p = QUEUES_HDR.pack(t_ns, len(levels), 0)
     p += b"".join(QUEUE.pack(k.encode(), lv, cap) for k, (lv, cap) in levels.items())
     return encode_frame(MSG_QUEUES, p)
+
+
+# ---- continuity, as a recorder sees it -------------------------------------------------
+
+def receiver_gap(reconnect: tuple[int | None, bool] | None, expect: int | None,
+                 cyc: int) -> tuple[str, int, int | None, int | None, str] | None:
+    """The gap a receiver (recorder, bridge) declares before cycle ``cyc``:
+    after a reconnect (``reconnect`` = (last cycle received or None, whether
+    the producer's session changed)), or when ``cyc`` is not the ``expect``-ed
+    next cycle. Returns (reason, from_cycle, to_cycle, lost, detail), with
+    None for what is not known, or None when there is no gap."""
+    if reconnect is not None:
+        last, new_session = reconnect
+        if last is None:
+            return None
+        if new_session:
+            return ("producer_restart", last + 1, cyc - 1 if cyc > last else None, None,
+                    "telemetry producer restarted (new session); cycles in between were not received")
+        return ("reconnect", last + 1, cyc - 1, cyc - last - 1 if cyc > last else None,
+                "connection lost and re-established")
+    if expect is not None and cyc != expect:
+        return ("other", expect, cyc - 1, cyc - expect if cyc > expect else None,
+                "cycle counter discontinuity not announced by the controller")
+    return None

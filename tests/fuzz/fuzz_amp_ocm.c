@@ -39,14 +39,7 @@ static uint32_t loads;
 static uint32_t tamper_at;		/* 0 = none, else the load number */
 static uint32_t tamper_val;
 
-#define FZ_ASSERT(c)                                                   \
-	do {                                                           \
-		if (!(c)) {                                            \
-			fprintf(stderr, "fuzz_amp_ocm: %s:%d: %s\n",   \
-				__FILE__, __LINE__, #c);               \
-			abort();                                       \
-		}                                                      \
-	} while (0)
+#include "fuzz_assert.h"
 
 uint32_t fz_load(const volatile uint32_t *p)
 {

@@ -26,14 +26,7 @@
 
 #define PIPE_CYCLES 3000u
 
-#define FZ_ASSERT(c)                                                   \
-	do {                                                           \
-		if (!(c)) {                                            \
-			fprintf(stderr, "fuzz_gcode: %s:%d: %s\n",     \
-				__FILE__, __LINE__, #c);               \
-			abort();                                       \
-		}                                                      \
-	} while (0)
+#include "fuzz_assert.h"
 
 static void check_block(const struct gc_state *st, const struct gc_block *b,
 			uint32_t line)

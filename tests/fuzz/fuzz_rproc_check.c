@@ -22,14 +22,7 @@
 
 #include "zynq_servo_rproc_check.h"
 
-#define FZ_ASSERT(c)                                                   \
-	do {                                                           \
-		if (!(c)) {                                            \
-			fprintf(stderr, "fuzz_rproc_check: %s:%d: %s\n", \
-				__FILE__, __LINE__, #c);               \
-			abort();                                       \
-		}                                                      \
-	} while (0)
+#include "fuzz_assert.h"
 
 #define CARVEOUT_START 0x1f000000ULL
 #define CARVEOUT_SIZE  0x01000000ULL

@@ -27,14 +27,7 @@
 
 #include <sys/ioctl.h>
 
-#define FZ_ASSERT(c)                                                   \
-	do {                                                           \
-		if (!(c)) {                                            \
-			fprintf(stderr, "fuzz_telem_client: %s:%d: %s\n", \
-				__FILE__, __LINE__, #c);               \
-			abort();                                       \
-		}                                                      \
-	} while (0)
+#include "fuzz_assert.h"
 
 static const char fz_token[] = "fuzz-telemetry-token-0123456789ab";
 static struct telem servers[2];	/* [0] without a token, [1] with one */
