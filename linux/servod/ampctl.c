@@ -89,8 +89,9 @@ int main(int argc, char **argv)
 		while ((r = read(0, buf, sizeof(buf))) > 0)
 			if (write(fd, buf, (size_t)r) != r)
 				break;
-	} else if (write(fd, req, len) != (ssize_t)len) {
-		/* servod refused the connection and closed it: its answer says why */
+	} else if (write(fd, req, len) != (ssize_t)len && errno != EPIPE && errno != ECONNRESET) {
+		/* EPIPE/ECONNRESET: servod refused the connection and closed
+		 * it, and its answer, read below, says why */
 		fprintf(stderr, "ampctl: write: %s\n", strerror(errno));
 	}
 	shutdown(fd, SHUT_WR);
