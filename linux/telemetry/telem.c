@@ -634,6 +634,14 @@ static int token_ok(const struct telem *t, const unsigned char *p, uint32_t n)
 	return d == 0;
 }
 
+/* The header of the frame being received in c->in (at least FRAME_HDR bytes). */
+static void in_hdr(const struct telem_client *c, uint16_t *type, uint16_t *flags, uint32_t *len)
+{
+	memcpy(type, c->in, 2);
+	memcpy(flags, c->in + 2, 2);
+	memcpy(len, c->in + 4, 4);
+}
+
 /* The AUTH frame so far in c->in: 1 complete and accepted, 0 incomplete,
  * -1 refused. */
 static int auth_check(struct telem *t, struct telem_client *c)
@@ -643,9 +651,7 @@ static int auth_check(struct telem *t, struct telem_client *c)
 
 	if (c->in_len < FRAME_HDR)
 		return 0;
-	memcpy(&type, c->in, 2);
-	memcpy(&flags, c->in + 2, 2);
-	memcpy(&len, c->in + 4, 4);
+	in_hdr(c, &type, &flags, &len);
 	if (type != TELEM_MSG_AUTH || flags || len > TELEM_TOKEN_MAX)
 		return -1;
 	if (c->in_len < FRAME_HDR + len)
@@ -673,9 +679,7 @@ static int request_check(const struct telem_client *c)
 
 	if (c->in_len < FRAME_HDR)
 		return 0;
-	memcpy(&type, c->in, 2);
-	memcpy(&flags, c->in + 2, 2);
-	memcpy(&len, c->in + 4, 4);
+	in_hdr(c, &type, &flags, &len);
 	if (type != TELEM_MSG_REQUEST || flags || len < 4u || len > 4u + TELEM_REQ_MAX)
 		return -1;
 	return c->in_len >= FRAME_HDR + len;

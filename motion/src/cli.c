@@ -151,13 +151,14 @@ static int set_option(struct cli *c, const char *a, const char *v)
 		if (parse_num(a, v, 0, 1e15, &d))
 			return -1;
 		c->max_cycles = (unsigned long long)d;
-	} else if (strcmp(a, "--scale") == 0 || strcmp(a, "--tol") == 0) {
+	} else if (strcmp(a, "--scale") == 0) {
 		if (parse_num(a, v, 0, 1e12, &d))
 			return -1;
-		if (a[2] == 's')
-			c->cfg.increments_per_mm = d;
-		else
-			c->cfg.chord_tol = d;
+		c->cfg.increments_per_mm = d;
+	} else if (strcmp(a, "--tol") == 0) {
+		if (parse_num(a, v, 0, 1e12, &d))
+			return -1;
+		c->cfg.chord_tol = d;
 	} else if (strcmp(a, "--vmax") == 0 || strcmp(a, "--amax") == 0 ||
 		   strcmp(a, "--jmax") == 0 || strcmp(a, "--travel") == 0) {
 		if (parse_num(a, v, 0, 1e12, &d))

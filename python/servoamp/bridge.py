@@ -297,12 +297,7 @@ class Bridge:
             log_time=h.t_ns)
         if not self.meta_written and self.mcap is not None:
             self.meta_written = True
-            self.mcap.write_metadata("servoamp", {
-                "controller_id": h.controller_id, "n_axes": str(h.n_axes),
-                "cycle_period_ns": str(h.cycle_period_ns), "clock_hz": str(h.clock_hz),
-                "wire_version": str(h.version), "session_id": f"{h.session_id:016x}",
-                "realtime_minus_monotonic_ns": str(h.realtime_ns - h.t_ns),
-                "time_base": "controller CLOCK_MONOTONIC (ns)", "encoding": "protobuf"})
+            self.mcap.write_metadata("servoamp", {**tw.hello_metadata(h), "encoding": "protobuf"})
 
     def _cycle_discontinuity(self, cyc: int, t_ns: int) -> None:
         g = tw.receiver_gap(self.pending_reconnect, self.expect, cyc)

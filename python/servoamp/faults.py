@@ -72,8 +72,14 @@ LINUX_IRQ = 70                         # Linux's (TTC0 timer 3, UIO)
 SETTLE_S = 1.0                         # guest seconds to let a recovery run
 
 
-def enable_reg(base: int, irq: int) -> tuple[int, int]:
-    return base + 4 * (irq // 32), 1 << (irq % 32)
+def irq_off(irq: int, usec: int | None = None) -> str:
+    """Guest shell: disable a GIC interrupt at the distributor, and with
+    usec enable it again after that long."""
+    bank, bit = 4 * (irq // 32), 1 << (irq % 32)
+    cmd = f"devmem 0x{GICD_ICENABLER + bank:08x} 32 0x{bit:x}"
+    if usec is not None:
+        cmd += f"; usleep {usec}; devmem 0x{GICD_ISENABLER + bank:08x} 32 0x{bit:x}"
+    return cmd
 
 
 @dataclass
@@ -137,6 +143,10 @@ class Campaign:
 
     def word(self, off: int) -> str:
         return f"0x{self.ocm + off:08x}"
+
+    def read_word(self, off: int) -> int:
+        """A word of the amp_lib region, read with devmem."""
+        return int(self.sh(f"devmem {self.word(off)} 32").strip().splitlines()[-1], 16)
 
 
 def _delta(a: dict[str, str], b: dict[str, str], key: str) -> int:
@@ -202,8 +212,8 @@ def f_mbox_length(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
     c.sh(f"devmem {c.word(OFF_REQ + 4 * HDR_LENGTH_WORD)} 32 0xfffffff0 && "
          f"devmem {c.word(OFF_MBOX_SEM)} 32 {SEM_BUSY}")
     c.sh("sleep 0.1")
-    sem = int(c.sh(f"devmem {c.word(OFF_MBOX_SEM)} 32").strip().splitlines()[-1], 16)
-    status = int(c.sh(f"devmem {c.word(OFF_RESP + 4 * HDR_STATUS_WORD)} 32").strip().splitlines()[-1], 16)
+    sem = c.read_word(OFF_MBOX_SEM)
+    status = c.read_word(OFF_RESP + 4 * HDR_STATUS_WORD)
     status = status - (1 << 32) if status & 0x80000000 else status
     get = c.sh("ampctl param get axes 2>&1")
     o.detected_by = (f"servo: frame check refused it, answered status {status}"
@@ -219,7 +229,7 @@ def f_cyc_sem(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
     c.sh(f"devmem {c.word(OFF_CYC_SEM)} 32 0x5a5a5a5a")
     c.sh("sleep 0.5")
     after = c.stats()
-    sem = int(c.sh(f"devmem {c.word(OFF_CYC_SEM)} 32").strip().splitlines()[-1], 16)
+    sem = c.read_word(OFF_CYC_SEM)
     o.detected_by = (f"Linux: semaphore neither idle nor busy, sem_corrupt +{_delta(before, after, 'linux.sem_corrupt')}"
                      if _delta(before, after, "linux.sem_corrupt") else "not detected")
     o.cycles = "same cycle" if _delta(before, after, "linux.sem_corrupt") else "-"
@@ -242,9 +252,7 @@ def f_mbox_sem(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
 
 
 def f_servo_irq_short(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
-    reg_off, bit = enable_reg(GICD_ICENABLER, SERVO_IRQ)
-    reg_on, _ = enable_reg(GICD_ISENABLER, SERVO_IRQ)
-    c.sh(f"devmem 0x{reg_off:08x} 32 0x{bit:x}; usleep 3000; devmem 0x{reg_on:08x} 32 0x{bit:x}")
+    c.sh(irq_off(SERVO_IRQ, 3000))
     c.sh("sleep 0.3")
     after = c.stats()
     missed = _delta(before, after, "servo.missed")
@@ -254,15 +262,12 @@ def f_servo_irq_short(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
 
 
 def f_servo_irq_long(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
-    reg_off, bit = enable_reg(GICD_ICENABLER, SERVO_IRQ)
-    c.sh(f"devmem 0x{reg_off:08x} 32 0x{bit:x}")
+    c.sh(irq_off(SERVO_IRQ))
     _stall_seen(c, o, before)
 
 
 def f_linux_irq(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
-    reg_off, bit = enable_reg(GICD_ICENABLER, LINUX_IRQ)
-    reg_on, _ = enable_reg(GICD_ISENABLER, LINUX_IRQ)
-    c.sh(f"devmem 0x{reg_off:08x} 32 0x{bit:x}; usleep 50000; devmem 0x{reg_on:08x} 32 0x{bit:x}")
+    c.sh(irq_off(LINUX_IRQ, 50000))
     c.sh("sleep 0.5")
     after = c.stats()
     ss = _delta(before, after, "servo.safestops")

@@ -121,13 +121,7 @@ class _Session:
             "ring_capacity": h.ring_capacity, "realtime_ns": h.realtime_ns})
         if not self.meta_written:
             self.meta_written = True
-            self.w.metadata("servoamp", {
-                "controller_id": h.controller_id, "n_axes": str(h.n_axes),
-                "cycle_period_ns": str(h.cycle_period_ns), "clock_hz": str(h.clock_hz),
-                "wire_version": str(h.version), "session_id": f"{h.session_id:016x}",
-                "realtime_minus_monotonic_ns": str(h.realtime_ns - h.t_ns),
-                "time_base": "controller CLOCK_MONOTONIC (ns)",
-            })
+            self.w.metadata("servoamp", tw.hello_metadata(h))
 
     def gap(self, t_ns: int, reason: str, source: str, frm: int | None, to: int | None,
             lost: int | None, detail: str) -> None:

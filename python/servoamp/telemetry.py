@@ -90,6 +90,18 @@ class Hello:
     controller_id: str
 
 
+def hello_metadata(h: Hello) -> dict[str, str]:
+    """The recording's "servoamp" metadata record, from the first HELLO
+    (servoamp record and servoamp bridge write the same keys)."""
+    return {
+        "controller_id": h.controller_id, "n_axes": str(h.n_axes),
+        "cycle_period_ns": str(h.cycle_period_ns), "clock_hz": str(h.clock_hz),
+        "wire_version": str(h.version), "session_id": f"{h.session_id:016x}",
+        "realtime_minus_monotonic_ns": str(h.realtime_ns - h.t_ns),
+        "time_base": "controller CLOCK_MONOTONIC (ns)",
+    }
+
+
 @dataclass(frozen=True)
 class Stats:
     t_ns: int
