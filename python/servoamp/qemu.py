@@ -30,7 +30,7 @@ import socket
 import subprocess
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -409,8 +409,12 @@ class Uart:
     Renode's terminal tester does. ANSI escape sequences and CR are removed.
     """
 
-    def __init__(self, name: str, sock: socket.socket, log_path: Path) -> None:
+    def __init__(self, name: str, sock: socket.socket, log_path: Path,
+                 on_timeout: Callable[[str], object] | None = None) -> None:
         self.name = name
+        #: called (outside the lock) when a wait times out, before the
+        #: QemuError: QemuMachine dumps both vCPUs' state there
+        self.on_timeout = on_timeout
         self._sock = sock
         self._log = log_path.open("wb")
         self._buf = ""
@@ -458,9 +462,17 @@ class Uart:
                 left = deadline - time.monotonic()
                 if left <= 0 or self._closed:
                     tail = self._buf[self._pos:][-800:]
-                    state = "closed" if self._closed else f"{timeout:g} s"
-                    raise QemuError(f"{self.name}: no {what} ({state}); unread output:\n{tail}")
+                    closed = self._closed
+                    break
                 self._cond.wait(left)
+        state = "closed" if closed else f"{timeout:g} s"
+        extra = ""
+        if not closed and self.on_timeout is not None:
+            try:
+                self.on_timeout(f"{self.name}: no {what} within {timeout:g} s")
+            except Exception as e:  # the dump must never hide the timeout
+                extra = f"\n(vCPU state dump failed: {e})"
+        raise QemuError(f"{self.name}: no {what} ({state}); unread output:\n{tail}{extra}")
 
     def wait_for_line(self, text: str, timeout: float = 10.0, regex: bool = False) -> str:
         """Wait for a line that contains ``text`` (or matches the regex) and
@@ -659,7 +671,8 @@ class QemuMachine:
                 except socket.timeout:
                     raise QemuError(f"QEMU did not connect {u['name']}; see {self.run_dir}/qemu.stderr") from None
                 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                self.uarts.append(Uart(str(u["name"]), conn, self.run_dir / f"{u['name']}.log"))
+                self.uarts.append(Uart(str(u["name"]), conn, self.run_dir / f"{u['name']}.log",
+                                       on_timeout=self.dump_state))
             self._qmp = Qmp(qmp_path)
         except BaseException:
             self._failed = True
@@ -710,6 +723,23 @@ class QemuMachine:
     def mark_failed(self) -> None:
         """Keep the run directory whatever happens at stop()."""
         self._failed = True
+
+    def dump_state(self, reason: str = "requested") -> Path | None:
+        """Write every vCPU's registers (QMP ``info registers``, the PC and
+        LR symbolised), CPU0's GIC CPU interface (running priority, highest
+        pending) and the distributor's active bits into ``vcpu-state.txt``
+        in the run directory (appended, so several dumps of one run are
+        kept), with the VM paused meanwhile; mark the run failed so the
+        logs are kept. Called by the UARTs when a wait times out."""
+        if self._qmp is None or self.run_dir is None or not self.running:
+            return None
+        self._failed = True
+        out = self.run_dir / "vcpu-state.txt"
+        text = vcpu_report(self, reason)
+        with out.open("a") as f:
+            f.write(text)
+        _log(f"{reason}: vCPU state in {out}")
+        return out
 
     @property
     def running(self) -> bool:
@@ -819,3 +849,103 @@ def iter_word_samples(machine: QemuMachine, addr: int, count: int, interval: flo
         if i:
             time.sleep(interval)
         yield machine.read_word(addr)
+
+
+# --------------------------------------------------------------------------
+# vCPU state on a hang
+# --------------------------------------------------------------------------
+
+
+class Symbols:
+    """Address to ``symbol+0xoff`` for an ELF (``nm -n``), loaded once."""
+
+    _cache: dict[Path, Symbols] = {}
+
+    def __init__(self, elf: Path) -> None:
+        self.elf = elf
+        self.addrs: list[int] = []
+        self.names: list[str] = []
+        nm = shutil.which("arm-linux-gnueabihf-nm") or shutil.which("arm-none-eabi-nm") or "nm"
+        res = subprocess.run([nm, "-n", str(elf)], text=True, capture_output=True)
+        for line in res.stdout.splitlines():
+            parts = line.split()
+            if len(parts) == 3 and parts[1] in "tTwWaA" and not parts[2].startswith("$"):
+                self.addrs.append(int(parts[0], 16))
+                self.names.append(parts[2])
+
+    @classmethod
+    def of(cls, elf: Path) -> Symbols | None:
+        if not elf.exists():
+            return None
+        if elf not in cls._cache:
+            cls._cache[elf] = cls(elf)
+        return cls._cache[elf]
+
+    def lookup(self, addr: int) -> str | None:
+        import bisect
+
+        i = bisect.bisect_right(self.addrs, addr) - 1
+        if i < 0 or addr - self.addrs[i] > 0x100000:
+            return None
+        return f"{self.names[i]}+{addr - self.addrs[i]:#x}"
+
+
+def _symbol_files(cpu: int) -> list[Path]:
+    """Where an address of ``cpu`` may come from: CPU0 runs Linux (vmlinux)
+    and servod; CPU1 the servo firmware (its ELF) or the boot stub."""
+    if cpu == 0:
+        return [REPO / "build/kernel/obj/vmlinux", REPO / "build/linux/servod/servod"]
+    return sorted((REPO / "build/rpu_app").glob("*/servo.elf"))
+
+
+def symbolise(cpu: int, addr: int) -> str:
+    for f in _symbol_files(cpu):
+        syms = Symbols.of(f)
+        hit = syms.lookup(addr) if syms else None
+        if hit:
+            return f"{hit} ({f.name})"
+    return "?"
+
+
+_REG = re.compile(r"R(\d\d)=([0-9a-fA-F]{8})")
+
+
+def vcpu_report(machine: QemuMachine, reason: str) -> str:
+    """The text of :meth:`QemuMachine.dump_state` (VM paused meanwhile)."""
+    lines = [f"=== {time.strftime('%H:%M:%S')} {reason}"]
+    paused = False
+    try:
+        machine._qmp.execute("stop")  # type: ignore[union-attr]
+        paused = True
+    except (QemuError, OSError) as e:
+        lines.append(f"(could not pause: {e})")
+    try:
+        for cpu in range(int(machine.board.qemu["smp"])):
+            regs = machine.hmp("info registers", cpu=cpu)
+            lines.append(f"--- CPU{cpu}")
+            lines.append(regs.rstrip())
+            found = dict((int(n), int(v, 16)) for n, v in _REG.findall(regs))
+            for n, name in ((15, "pc"), (14, "lr")):
+                if n in found:
+                    lines.append(f"{name} {found[n]:08x} = {symbolise(cpu, found[n])}")
+        # CPU0's GIC CPU interface (the monitor reads as CPU0; RPR and HPPIR
+        # have no side effects, IAR would acknowledge and is never read) and
+        # the distributor's active and pending bits.
+        gicc = machine.board.data.get("gic", {}).get("cpu", 0xF8F00100)
+        gicd = machine.board.data.get("gic", {}).get("dist", 0xF8F01000)
+        try:
+            lines.append("--- GIC (as seen by CPU0)")
+            lines.append("GICC_RPR " + machine.hmp(f"xp /1wx {gicc + 0x14:#x}").strip())
+            lines.append("GICC_HPPIR " + machine.hmp(f"xp /1wx {gicc + 0x18:#x}").strip())
+            lines.append("GICD_ISACTIVER " + machine.hmp(f"xp /4wx {gicd + 0x300:#x}").strip())
+            lines.append("GICD_ISPENDR " + machine.hmp(f"xp /4wx {gicd + 0x200:#x}").strip())
+            lines.append("GICD_ISENABLER " + machine.hmp(f"xp /4wx {gicd + 0x100:#x}").strip())
+        except QemuError as e:
+            lines.append(f"(GIC: {e})")
+    finally:
+        if paused:
+            try:
+                machine._qmp.execute("cont")  # type: ignore[union-attr]
+            except (QemuError, OSError):
+                pass
+    return "\n".join(lines) + "\n\n"

@@ -281,7 +281,7 @@ def test_connect_refused_without_duration(tmp_path: Path) -> None:
 
 def test_mypy_strict() -> None:
     mods = [str(TOP / "python" / "servoamp" / f"{m}.py")
-            for m in ("telemetry", "mcapio", "record", "info", "plot", "cli", "netboard",
+            for m in ("telemetry", "mcapio", "record", "info", "plot", "cli", "netboard", "recovery_stress",
                       "demo_record", "bridge", "pbenc")]
     p = subprocess.run([str(Path(sys.executable).parent / "mypy"), "--strict", *mods],
                        capture_output=True, text=True, timeout=300, cwd=TOP)
