@@ -162,13 +162,16 @@ void params_load(struct servod *sd)
 	logm(sd, "loaded %d parameter(s) from %s", n, path);
 }
 
-/* write temp + fsync + rename + fsync(dir) */
+/*
+ * write temp + fsync + rename + fsync(dir): 0, or the errno of the step that
+ * failed. A failure leaves the file as it was (the temp file is removed).
+ */
 static int params_save(const struct servod *sd)
 {
 	const char *path = sd->opt.param_path;
 	char tmp[300], dir[300], v[48];
 	FILE *f;
-	int fd;
+	int fd, err;
 	char *slash;
 
 	snprintf(dir, sizeof(dir), "%s", path);
@@ -182,7 +185,8 @@ static int params_save(const struct servod *sd)
 	snprintf(tmp, sizeof(tmp), "%s.tmp", path);
 	f = fopen(tmp, "w");
 	if (!f)
-		return -1;
+		return errno;
+	errno = 0;
 	fprintf(f, "# servod parameter set (servoamp/servo_proto.h); loaded into the servo at every attach\n");
 	for (int i = 0; i < SP_P_COUNT; i++) {
 		if (!(param_desc[i].flags & SP_F_RESTORE))
@@ -190,13 +194,17 @@ static int params_save(const struct servod *sd)
 		fmt_value(&param_desc[i], sd->pset[i], v, sizeof(v));
 		fprintf(f, "%s %s\n", param_desc[i].name, v);
 	}
-	if (fflush(f) || fsync(fileno(f))) {
+	if (fflush(f) || ferror(f) || fsync(fileno(f))) {
+		err = errno ? errno : EIO;
 		fclose(f);
-		return -1;
+		unlink(tmp);
+		return err;
 	}
-	fclose(f);
-	if (rename(tmp, path))
-		return -1;
+	if (fclose(f) || rename(tmp, path)) {
+		err = errno;
+		unlink(tmp);
+		return err;
+	}
 	fd = open(dir, O_RDONLY | O_DIRECTORY);
 	if (fd >= 0) {
 		fsync(fd);
@@ -207,12 +215,20 @@ static int params_save(const struct servod *sd)
 
 /* ---- the servo -------------------------------------------------------------- */
 
-int params_restore(struct servod *sd, char *msg, size_t n)
+/*
+ * servod's whole set to the servo in one SP_CMD_PARAM_SET_MANY: SE_OK, or
+ * SE_* with a message. *refused: the servo answered with an error status,
+ * so it applied none of it (the request is checked whole before any of it
+ * is applied); otherwise, on an error, what it holds is unknown. SE_OK
+ * ends a pending re-send (session.params_resend).
+ */
+static int send_set(struct servod *sd, int *refused, char *msg, size_t n)
 {
 	uint32_t req[1 + 2 * SP_P_COUNT], resp[4] = { 0 }, cnt = 0, len = 0;
 	int32_t status;
 	int rc;
 
+	*refused = 0;
 	for (int i = 0; i < SP_P_COUNT; i++) {
 		if (!(param_desc[i].flags & SP_F_RESTORE))
 			continue;
@@ -225,14 +241,46 @@ int params_restore(struct servod *sd, char *msg, size_t n)
 			  msg, n);
 	if (rc == SE_OK && status) {
 		snprintf(msg, n, "servo refused the parameter set: %s", sp_strerror(status));
+		*refused = 1;
 		rc = SE_SERVO;
 	} else if (rc == SE_OK && (len != 4 || resp[0] != cnt)) {
 		/* the answer is {n}: checked like input from the network */
-		snprintf(msg, n, "servo answered the parameter set of %u with %u byte(s)%s%u: refused", cnt, len,
-			 len >= 4 ? ", count " : "", len >= 4 ? resp[0] : 0u);
+		char count[24] = "";
+
+		if (len >= 4)
+			snprintf(count, sizeof(count), ", count %u", resp[0]);
+		snprintf(msg, n, "servo answered the parameter set of %u with %u byte(s)%s: refused", cnt, len, count);
 		rc = SE_SERVO;
+	} else if (rc == SE_OK) {
+		sd->session.params_resend = 0;	/* the servo has servod's set */
+		sd->session.resend_tries = 0;
 	}
 	return rc;
+}
+
+int params_restore(struct servod *sd, char *msg, size_t n)
+{
+	int refused;
+
+	return send_set(sd, &refused, msg, n);
+}
+
+void params_resend(struct servod *sd)
+{
+	struct session *ss = &sd->session;
+	uint32_t tries = ss->resend_tries;
+	uint64_t now = mono_now_ns();
+	char msg[256];
+
+	if (!ss->params_resend || (tries && now - ss->resend_ns < 1000000000ull))
+		return;
+	ss->resend_ns = now;
+	if (params_restore(sd, msg, sizeof(msg)) == SE_OK) {
+		logm(sd, "servod's parameter set sent again: the servo has it (try %u)", tries + 1u);
+		return;
+	}
+	if (!ss->resend_tries++)
+		logw(sd, "sending servod's parameter set again failed (%s): trying every second", msg);
 }
 
 /* What servod itself follows of a new value: the period, the watchdog, the axes. */
@@ -341,6 +389,44 @@ static int param_get(struct servod *sd, struct out *o, int id, char *msg, size_t
 	return SE_OK;
 }
 
+/*
+ * The servo took d = w, but servod could not store its set (err). A set is
+ * all or nothing: servod's set (the file's, d unchanged) goes back to the
+ * servo, so that what the servo uses (`param get`), what servod follows
+ * (its set, period, watchdog, axes) and the file agree again. A servo that
+ * refuses it (an error status: it applied none of it, it still uses w) is
+ * followed by servod, and the message says that the file differs. Without
+ * a usable answer the servo's values are unknown: servod keeps its set and
+ * sends it again (params_resend) until the servo takes it. SE_IO.
+ */
+static int save_failed(struct servod *sd, const struct sp_param_desc *d, uint32_t w, int err, char *msg, size_t n)
+{
+	const char *path = sd->opt.param_path;
+	char why[160], was[48], now[48];
+	int refused;
+
+	fmt_value(d, sd->pset[d->id], was, sizeof(was));
+	fmt_value(d, w, now, sizeof(now));
+	if (send_set(sd, &refused, why, sizeof(why)) == SE_OK) {
+		snprintf(msg, n, "cannot store %s: %s; the servo set back to %s=%s: nothing changed", path,
+			 strerror(err), d->name, was);
+	} else if (refused) {
+		sd->pset[d->id] = w;
+		apply_local(sd, d->id, w);
+		params_publish(sd, d->id, w);
+		snprintf(msg, n, "cannot store %s: %s; the servo refused to go back to %s=%s (%s): the servo and "
+			 "servod use %s=%s, the file still says %s", path, strerror(err), d->name, was, why, d->name, now,
+			 was);
+	} else {
+		sd->session.params_resend = 1;
+		snprintf(msg, n, "cannot store %s: %s; setting the servo back to %s=%s failed (%s): servod and the file "
+			 "say %s=%s, the servo may use %s until servod's set reaches it (sent again every second)", path,
+			 strerror(err), d->name, was, why, d->name, was, now);
+	}
+	logw(sd, "param set %s %s: %s", d->name, now, msg);
+	return SE_IO;
+}
+
 static int param_set(struct servod *sd, struct out *o, int id, const char *value, char *msg, size_t n)
 {
 	const struct sp_param_desc *d = &param_desc[id];
@@ -367,22 +453,24 @@ static int param_set(struct servod *sd, struct out *o, int id, const char *value
 		char why[160];
 		size_t used = strlen(msg);
 
-		if (params_restore(sd, why, sizeof(why)) == SE_OK)
+		if (params_restore(sd, why, sizeof(why)) == SE_OK) {
 			snprintf(msg + used, n - used, "; servod's parameter set sent again (%s unchanged)", d->name);
-		else
+		} else {
+			sd->session.params_resend = 1;
 			snprintf(msg + used, n - used, "; sending servod's parameter set again failed (%s): "
-				 "the servo's parameters are unknown until it restarts", why);
+				 "servod sends it again every second until the servo takes it", why);
+		}
 		return rc;
 	}
 	if (d->flags & SP_F_RESTORE) {
 		uint32_t old = sd->pset[id];
+		int err;
 
 		sd->pset[id] = resp[1];
-		if (params_save(sd)) {
+		err = params_save(sd);
+		if (err) {
 			sd->pset[id] = old;
-			snprintf(msg, n, "cannot store %s: %s (the servo has the new value)", sd->opt.param_path,
-				 strerror(errno));
-			return SE_IO;
+			return save_failed(sd, d, resp[1], err, msg, n);
 		}
 	}
 	apply_local(sd, (uint32_t)id, resp[1]);

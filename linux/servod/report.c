@@ -54,9 +54,9 @@ static int req_status(struct servod *sd, struct out *o, int argc, char **argv, c
 	    sstate_name(pi.state), pi.fault, fault_name(pi.fault), pi.epoch, pi.attach_count);
 	put(o, "period_us=%u axes=%u wd_limit=%u\n", sd->pset[SP_P_cycle_period_us], sd->pset[SP_P_axes],
 	    sd->pset[SP_P_wd_limit]);
-	put(o, "params_restored_attach=%u restores=%llu recoveries=%llu recovering=%d\n",
+	put(o, "params_restored_attach=%u restores=%llu recoveries=%llu recovering=%d params_resend=%d\n",
 	    sd->session.restored_attach, (unsigned long long)restores, (unsigned long long)recoveries,
-	    session_recovering(&sd->session));
+	    session_recovering(&sd->session), sd->session.params_resend);
 	prog_format_status(&sd->prog, o, cmd, act);
 	if (peer != AMP_OK) {
 		snprintf(msg, n, "servo not running (remoteproc %s, link: %s)", rproc_state(&sd->rproc),

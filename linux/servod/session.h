@@ -48,6 +48,9 @@ struct session {
 	enum session_state state;	/* written under sd->lock by the main thread */
 	uint32_t epoch;			/* of the region servod initialised */
 	uint32_t restored_attach;	/* attach_count whose parameters were loaded */
+	int params_resend;		/* the servo may hold other values than servod's set (params_resend()) */
+	uint32_t resend_tries;		/* failed tries since params_resend was set */
+	uint64_t resend_ns;		/* the last try (mono_now_ns) */
 	struct timespec recover_t0;	/* when the crash was reported */
 	int waiting_logged;		/* CLOSED: "waiting until it is offline" said once */
 	atomic_int stall_pending;	/* the cycle thread saw a stall: report it (enum stall_why) */

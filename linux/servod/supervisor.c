@@ -148,4 +148,6 @@ void supervise(struct servod *sd)
 	pthread_mutex_unlock(&sd->lock);
 	if (peer == AMP_OK && pi.attach_count != ss->restored_attach && strcmp(rs, "running") == 0)
 		restore(sd, pi.attach_count);
+	else if (peer == AMP_OK && ss->params_resend && !session_recovering(ss) && strcmp(rs, "running") == 0)
+		params_resend(sd);
 }

@@ -235,9 +235,58 @@ static struct {
 	int64_t w[2];
 	atomic_uint set_many;	/* parameter sets received */
 	atomic_int honest_sets;	/* answer parameter sets {n}, not as scripted */
+	/* model: a servo with a parameter store that GET, SET and SET_MANY use
+	 * as the firmware does (SET_MANY: all or nothing), not as scripted */
+	atomic_int model;
+	atomic_uint val[SP_P_COUNT];
+	atomic_int many_status;	/* model: SET_MANY refused with this status */
+	atomic_int many_garbled;	/* model: SET_MANY answered with no payload */
 } fake;
 
 static _Alignas(64) uint8_t fake_ocm[AMP_OCM_SIZE];
+
+static uint32_t payload_word(const struct amp_mbox_req *r, uint32_t i)
+{
+	const uint8_t *p = r->payload + 4u * i;
+
+	return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+/* The model servo's answer to one request (req: its first two words). */
+static void fake_model_serve(const struct amp_mbox_req *r, const uint32_t *req)
+{
+	uint32_t out[2] = { req[0], 0 }, nw = r->length / 4u;
+
+	switch (r->command) {
+	case SP_CMD_PARAM_GET:
+	case SP_CMD_PARAM_SET:
+		if (req[0] >= SP_P_COUNT) {
+			(void)amp_servo_mbox_respond(&fake.s, SP_E_ID, 0, 0);
+			return;
+		}
+		if (r->command == SP_CMD_PARAM_SET)
+			atomic_store(&fake.val[req[0]], req[1]);
+		out[1] = atomic_load(&fake.val[req[0]]);
+		(void)amp_servo_mbox_respond(&fake.s, 0, out, 8);
+		return;
+	case SP_CMD_PARAM_SET_MANY:
+		if (atomic_load(&fake.many_status)) {
+			(void)amp_servo_mbox_respond(&fake.s, atomic_load(&fake.many_status), 0, 0);
+			return;
+		}
+		if (atomic_load(&fake.many_garbled)) {
+			(void)amp_servo_mbox_respond(&fake.s, 0, 0, 0);
+			return;
+		}
+		for (uint32_t i = 0; i < req[0] && 2u + 2u * i < nw; i++)
+			if (payload_word(r, 1u + 2u * i) < SP_P_COUNT)
+				atomic_store(&fake.val[payload_word(r, 1u + 2u * i)], payload_word(r, 2u + 2u * i));
+		(void)amp_servo_mbox_respond(&fake.s, 0, out, 4);
+		return;
+	default:
+		(void)amp_servo_mbox_respond(&fake.s, SP_E_CMD, 0, 0);
+	}
+}
 
 static void *fake_servo(void *arg)
 {
@@ -255,6 +304,10 @@ static void *fake_servo(void *arg)
 				 (uint32_t)r.payload[4 * i + 2] << 16 | (uint32_t)r.payload[4 * i + 3] << 24;
 		if (r.command == SP_CMD_PARAM_SET_MANY)
 			atomic_fetch_add(&fake.set_many, 1);
+		if (atomic_load(&fake.model)) {
+			fake_model_serve(&r, req);
+			continue;
+		}
 		if (r.command == SP_CMD_PARAM_SET_MANY && atomic_load(&fake.honest_sets)) {
 			(void)amp_servo_mbox_respond(&fake.s, 0, req, 4);
 			continue;
@@ -422,6 +475,133 @@ static void test_param_answers_checked(void)
 	CHECK_EQ(params_restore(sd, msg, sizeof(msg)), SE_SERVO);
 	fake_answer(0, 4, 3, 0);
 	CHECK_EQ(params_restore(sd, msg, sizeof(msg)), SE_SERVO);
+	stop_fake_servo(sd, path);
+}
+
+/* ---- issue 20, item 6: a parameter set the file cannot take --------------- */
+
+static void read_text(const char *path, char *buf, size_t n)
+{
+	FILE *f = fopen(path, "r");
+	size_t r = f ? fread(buf, 1, n - 1, f) : 0;
+
+	buf[r] = 0;
+	if (f)
+		fclose(f);
+}
+
+/* servod's set, period, watchdog and axis count are what the model servo
+ * holds: the two sides agree */
+static int sides_agree(const struct servod *sd)
+{
+	for (int i = 0; i < SP_P_COUNT; i++)
+		if ((param_desc[i].flags & SP_F_RESTORE) && atomic_load(&fake.val[i]) != sd->pset[i])
+			return 0;
+	return sd->period_ns == sd->pset[SP_P_cycle_period_us] * 1000u && sd->axes == sd->pset[SP_P_axes] &&
+	       sd->amp.wd.limit == sd->pset[SP_P_wd_limit];
+}
+
+/*
+ * The servo takes a new value, then servod cannot store its file (ENOSPC:
+ * the temp file is /dev/full; EISDIR: the file's name is a directory).
+ * The servo used to keep the new value while servod kept the old one (and
+ * its old period, watchdog, axis count). Now the set is all or nothing:
+ * servod's set goes back to the servo, `param get` says the old value, the
+ * file is unchanged. A servo that refuses to go back is followed by servod
+ * (and the message says the file differs); one that gives no usable answer
+ * gets servod's set again from the supervisor's params_resend().
+ */
+static void test_param_save_failure(void)
+{
+	static const struct {
+		const char *name, *value;
+		int id;
+	} t[] = {
+		{ "cycle_period_us", "2000", SP_P_cycle_period_us },
+		{ "wd_limit", "20", SP_P_wd_limit },
+		{ "axes", "3", SP_P_axes },
+		{ "pos_kp", "70", SP_P_pos_kp },
+	};
+	char path[] = "/tmp/servod-unit-params.XXXXXX", tmp[64], keep[64], msg[512], body[512];
+	char file0[1024], file1[1024];
+	struct servod *sd = servod_with_fake_servo(path);
+	struct stat st;
+
+	snprintf(tmp, sizeof(tmp), "%s.tmp", path);
+	snprintf(keep, sizeof(keep), "%s.keep", path);
+	CHECK_EQ(amp_linux_set_wd_limit(&sd->amp, sd->pset[SP_P_wd_limit]), AMP_OK);
+	for (int i = 0; i < SP_P_COUNT; i++)	/* attached: the servo has servod's set */
+		atomic_store(&fake.val[i], sd->pset[i]);
+	atomic_store(&fake.model, 1);
+	CHECK_EQ(param_req(sd, "set", "pos_kp", "61.5", msg, sizeof(msg), body, sizeof(body)), SE_OK);
+	CHECK(sides_agree(sd));
+	read_text(path, file0, sizeof(file0));
+	CHECK(strstr(file0, "pos_kp 61.5\n") != 0);
+
+	/* ENOSPC on the write */
+	for (size_t i = 0; i < sizeof(t) / sizeof(t[0]); i++) {
+		uint32_t was = sd->pset[t[i].id];
+
+		CHECK_EQ(symlink("/dev/full", tmp), 0);
+		CHECK_EQ(param_req(sd, "set", t[i].name, t[i].value, msg, sizeof(msg), body, sizeof(body)), SE_IO);
+		CHECK(strstr(msg, "No space left on device") != 0);
+		CHECK(strstr(msg, "nothing changed") != 0);
+		printf("  %s %s: %s\n", t[i].name, t[i].value, msg);
+		CHECK_EQ(sd->pset[t[i].id], was);
+		CHECK(sides_agree(sd));
+		CHECK(lstat(tmp, &st) != 0 && errno == ENOENT);	/* no temp file left */
+		CHECK_EQ(param_req(sd, "get", t[i].name, 0, msg, sizeof(msg), body, sizeof(body)), SE_OK);
+		CHECK(strstr(body, t[i].name) != 0 && !strstr(body, t[i].value));
+		read_text(path, file1, sizeof(file1));
+		CHECK(!strcmp(file0, file1));
+	}
+	unlink(tmp);
+
+	/* EISDIR on the rename: the file's name is a directory now */
+	CHECK_EQ(rename(path, keep), 0);
+	CHECK_EQ(mkdir(path, 0700), 0);
+	CHECK_EQ(param_req(sd, "set", "axes", "2", msg, sizeof(msg), body, sizeof(body)), SE_IO);
+	CHECK(strstr(msg, "Is a directory") != 0 && strstr(msg, "nothing changed") != 0);
+	CHECK_EQ(sd->axes, 4);
+	CHECK(sides_agree(sd));
+	CHECK(stat(tmp, &st) != 0 && errno == ENOENT);
+
+	/* the servo refuses to go back (it applied none of it): servod follows
+	 * the servo, and says the file still has the old value */
+	atomic_store(&fake.many_status, SP_E_OVERLOAD);
+	CHECK_EQ(param_req(sd, "set", "cycle_period_us", "2000", msg, sizeof(msg), body, sizeof(body)), SE_IO);
+	atomic_store(&fake.many_status, 0);
+	CHECK(strstr(msg, "the servo and servod use cycle_period_us=2000, the file still says 1000") != 0);
+	printf("  refused: %s\n", msg);
+	CHECK_EQ(sd->pset[SP_P_cycle_period_us], 2000);
+	CHECK_EQ(sd->period_ns, 2000000u);
+	CHECK(sides_agree(sd));
+
+	/* no usable answer: servod keeps its set, says so, and the supervisor
+	 * sends it again until the servo has it */
+	atomic_store(&fake.many_garbled, 1);
+	CHECK_EQ(param_req(sd, "set", "wd_limit", "30", msg, sizeof(msg), body, sizeof(body)), SE_IO);
+	CHECK(strstr(msg, "the servo may use 30") != 0);
+	printf("  no answer: %s\n", msg);
+	CHECK_EQ(sd->session.params_resend, 1);
+	CHECK_EQ(sd->pset[SP_P_wd_limit], 10);
+	CHECK_EQ(atomic_load(&fake.val[SP_P_wd_limit]), 30);
+	params_resend(sd);	/* still no answer */
+	CHECK_EQ(sd->session.params_resend, 1);
+	atomic_store(&fake.many_garbled, 0);
+	sd->session.resend_ns = 0;	/* as if a second had passed */
+	params_resend(sd);
+	CHECK_EQ(sd->session.params_resend, 0);
+	CHECK(sides_agree(sd));
+
+	/* the file writable again: the next set is stored */
+	rmdir(path);
+	CHECK_EQ(rename(keep, path), 0);
+	CHECK_EQ(param_req(sd, "set", "axes", "2", msg, sizeof(msg), body, sizeof(body)), SE_OK);
+	read_text(path, file1, sizeof(file1));
+	CHECK(strstr(file1, "axes 2\n") != 0 && strstr(file1, "cycle_period_us 2000\n") != 0);
+	CHECK(sides_agree(sd));
+	atomic_store(&fake.model, 0);
 	stop_fake_servo(sd, path);
 }
 
@@ -820,6 +1000,7 @@ int main(void)
 	test_feedback_axis_count();
 	test_peer_error();
 	test_param_answers_checked();
+	test_param_save_failure();
 	test_cycle_bounds();
 	test_control_peer();
 	test_control_trickle();
