@@ -351,19 +351,59 @@ static bool zsr_in_carveout(const struct zsr_image_limits *lim, u32 da,
 	       (u64)da + len <= lim->carveout.end;
 }
 
+/**
+ * struct zsr_rsc_check - the walk of a resource table's entries
+ * @lim: where this board lets an image go
+ * @name: the image name, for messages
+ * @index: the index of the entry being checked
+ */
 struct zsr_rsc_check {
 	const struct zsr_image_limits *lim;
 	const char *name;
+	int index;
 };
 
-/* rsc_table_for_each_entry() callback: entries checked against the carveout */
+/**
+ * zsr_rsc_type_refused() - why an entry of this type has no place here
+ * @type: the entry's type
+ *
+ * The servo firmware announces its trace buffer (RSC_TRACE) and may
+ * describe its memory (RSC_CARVEOUT, checked with its addresses). Every
+ * other type would make the remoteproc core act for a firmware of another
+ * board, or be ignored by it with a warning.
+ *
+ * Return: the reason, or NULL for RSC_TRACE and RSC_CARVEOUT.
+ */
+static const char *zsr_rsc_type_refused(u32 type)
+{
+	if (type == RSC_TRACE || type == RSC_CARVEOUT)
+		return NULL;
+	if (type == RSC_DEVMEM)
+		return "RSC_DEVMEM maps device memory, and the servo core has no IOMMU";
+	if (type == RSC_VDEV)
+		return "RSC_VDEV is a virtio device; this board talks through OCM mailboxes";
+	if (type >= RSC_VENDOR_START && type <= RSC_VENDOR_END)
+		return "vendor-specific, and this driver handles no vendor resource";
+	return "unknown to the remoteproc core";
+}
+
+/* rsc_table_for_each_entry() callback: only the types the board uses, inside the carveout */
 static int zsr_check_rsc_entry(u32 type, void *rsc, int offset, int avail,
 			       void *data)
 {
-	const struct zsr_rsc_check *c = data;
+	struct zsr_rsc_check *c = data;
 	const struct zsr_image_limits *lim = c->lim;
 	const struct fw_rsc_carveout *mem = rsc;
 	const struct fw_rsc_trace *trace = rsc;
+	int index = c->index++;
+	const char *why;
+
+	why = zsr_rsc_type_refused(type);
+	if (why) {
+		dev_err(lim->dev, "%s: resource entry %d (type %u) refused: %s\n",
+			c->name, index, type, why);
+		return -EINVAL;
+	}
 
 	switch (type) {
 	case RSC_TRACE:
@@ -386,8 +426,20 @@ static int zsr_check_rsc_entry(u32 type, void *rsc, int offset, int avail,
 				c->name, offset);
 			return -EINVAL;
 		}
-		if (mem->da != (u32)FW_RSC_ADDR_ANY &&
-		    !zsr_in_carveout(lim, mem->da, mem->len)) {
+		/*
+		 * FW_RSC_ADDR_ANY would have the core allocate memory anywhere
+		 * (dma_alloc_coherent) and write its address into the table:
+		 * the servo firmware is linked to run from the carveout.
+		 */
+		if (mem->da == (u32)FW_RSC_ADDR_ANY ||
+		    mem->pa == (u32)FW_RSC_ADDR_ANY) {
+			dev_err(lim->dev, "%s: resource entry %d (type %u) refused: carveout '%.32s' with %s FW_RSC_ADDR_ANY, but the firmware runs from the carveout [0x%llx-0x%llx) at fixed addresses\n",
+				c->name, index, type, (const char *)mem->name,
+				mem->da == (u32)FW_RSC_ADDR_ANY ? "da" : "pa",
+				lim->carveout.start, lim->carveout.end);
+			return -EINVAL;
+		}
+		if (!zsr_in_carveout(lim, mem->da, mem->len)) {
 			dev_err(lim->dev, "%s: carveout entry '%.32s' [0x%x +0x%x) is not inside the carveout [0x%llx-0x%llx)\n",
 				c->name, (const char *)mem->name, mem->da,
 				mem->len, lim->carveout.start,
@@ -409,7 +461,9 @@ static int zsr_check_rsc_entry(u32 type, void *rsc, int offset, int avail,
  *
  * The core checks the table's header when it reads it; the driver checks
  * first that it can walk the table, then that the table is loaded into the
- * carveout (the core copies it there before the start) and that every
+ * carveout (the core copies it there before the start), that it has only
+ * the entry types the board uses (RSC_TRACE, RSC_CARVEOUT at a fixed
+ * address: no RSC_DEVMEM, RSC_VDEV, vendor or unknown type) and that every
  * trace buffer and carveout entry lies inside the carveout.
  *
  * Return: 0 if the table fits, -EINVAL otherwise.
@@ -418,7 +472,7 @@ static int zsr_check_rsc_table(const struct zsr_image_limits *lim, const char *n
 			       const struct firmware *fw,
 			       const struct elf32_shdr *sh)
 {
-	struct zsr_rsc_check c = { lim, name };
+	struct zsr_rsc_check c = { lim, name, 0 };
 	struct device *dev = lim->dev;
 	struct resource_table *table;
 	u64 end;
@@ -461,8 +515,8 @@ static int zsr_check_rsc_table(const struct zsr_image_limits *lim, const char *n
  * ELF32 ARM executable, header tables inside the file, PT_LOAD segments
  * inside the file and the carveout, never in OCM, not overlapping, the
  * entry point in one of them, section names bounded by the name table, and
- * the resource table (if any) and its entries inside the carveout. Every
- * refusal logs the reason.
+ * the resource table (if any) and its entries inside the carveout, of the
+ * types the board uses only. Every refusal logs the reason.
  *
  * Return: 0 if the image can be loaded, -EINVAL otherwise.
  */

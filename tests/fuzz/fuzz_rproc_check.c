@@ -10,8 +10,9 @@
  * carveout and OCM ranges (devicetree/zynq-7000-servoamp.dtsi). An image
  * both accept is then used as the core uses it, and what the driver
  * promises is asserted: find_table() (a copy of the core's) finds the same
- * resource table without reading past the file, the table's trace and
- * carveout entries lie inside the carveout, every PT_LOAD segment's bytes
+ * resource table without reading past the file, the table has trace and
+ * carveout entries only, inside the carveout (a carveout at fixed
+ * addresses, not FW_RSC_ADDR_ANY), every PT_LOAD segment's bytes
  * lie inside the file and its memory inside a model of the carveout (a
  * heap buffer of its size: both ends are touched), never in OCM, no two
  * segments overlap, the entry point is in one. Refusals return -EINVAL.
@@ -187,11 +188,15 @@ static int core_rsc_entry(u32 type, void *rsc, int offset, int avail, void *data
 		if (t->len)
 			FZ_ASSERT(carve[t->da - CARVEOUT_START] == 0 &&
 				  carve[t->da - CARVEOUT_START + t->len - 1u] == 0);
-	} else if (type == RSC_CARVEOUT) {
+	} else {
+		/* the board's types only: no RSC_DEVMEM, RSC_VDEV, vendor or
+		 * unknown type; a carveout at fixed addresses in the carveout */
 		const struct fw_rsc_carveout *c = rsc;
 
+		FZ_ASSERT(type == RSC_CARVEOUT);
 		FZ_ASSERT(avail >= (int)sizeof(*c));
-		FZ_ASSERT(c->da == (u32)FW_RSC_ADDR_ANY || in_carveout(c->da, c->len));
+		FZ_ASSERT(c->da != (u32)FW_RSC_ADDR_ANY && c->pa != (u32)FW_RSC_ADDR_ANY);
+		FZ_ASSERT(in_carveout(c->da, c->len));
 	}
 	return 0;
 }

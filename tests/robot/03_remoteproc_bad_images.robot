@@ -8,7 +8,9 @@ Documentation     Every bad firmware image (tests/robot/fixtures/
 ...               driver's checks: program and section headers, section
 ...               names bounded by the name table, load segments inside the
 ...               carveout and not overlapping, resource table and trace
-...               buffers inside the carveout (32-bit overflow-safe).
+...               buffers inside the carveout (32-bit overflow-safe), only
+...               the resource entry types the board uses (trace, carveout
+...               at fixed addresses: no devmem, vdev, vendor or unknown).
 Resource          resources/servoamp.resource
 Library           OperatingSystem
 Suite Setup       Boot Board To Shell
@@ -55,6 +57,20 @@ Trace Buffer Crossing The Carveout End
     bad-trace-crosses-carveout-end.elf    trace buffer 'test-fw trace' [0x1fffff00 +0x1000) is not inside the carveout
 Resource Table Outside The Carveout
     bad-rsc-table-outside.elf    resource table [0x1e000000-0x1e000044) is outside the carveout
+Carveout Entry At Any Device Address
+    [Documentation]    Issue 20, item 6: the core would allocate Linux memory
+    ...    anywhere for it; the old driver let it through unchecked.
+    bad-rsc-carveout-da-any.elf    resource entry 1 (type 0) refused: carveout 'test-fw heap' with da FW_RSC_ADDR_ANY
+Carveout Entry At Any Physical Address
+    bad-rsc-carveout-pa-any.elf    resource entry 1 (type 0) refused: carveout 'test-fw heap' with pa FW_RSC_ADDR_ANY
+Device Memory Entry
+    bad-rsc-devmem.elf    resource entry 1 (type 1) refused: RSC_DEVMEM maps device memory
+Virtio Device Entry
+    bad-rsc-vdev.elf    resource entry 1 (type 3) refused: RSC_VDEV is a virtio device
+Vendor Resource Entry
+    bad-rsc-vendor.elf    resource entry 1 (type 128) refused: vendor-specific
+Unknown Resource Type
+    bad-rsc-unknown-type.elf    resource entry 1 (type 4) refused: unknown to the remoteproc core
 Missing Firmware File              no-such-firmware.elf            request_firmware failed
 
 A Good Image Starts After The Bad Ones
@@ -67,7 +83,7 @@ The Bad Images Table Matches The Generator
     [Template]    NONE
     ${tsv}=    Get File    ${CURDIR}/../../build/tests/fixtures/bad-images.tsv
     ${lines}=    Get Line Count    ${tsv}
-    Should Be Equal As Integers    ${lines}    20
+    Should Be Equal As Integers    ${lines}    26
 
 *** Keywords ***
 Image Is Refused
