@@ -427,6 +427,30 @@ Out-Of-Range Parameter Answers Are Refused
     ${r}=    Exchange Window    1
     Exchange Should Run    ${r}
 
+A Parameter The File Cannot Take Changes Nothing
+    [Documentation]    Issue 20, item 6: the servo takes cycle_period_us
+    ...    2000, then servod cannot store its file (a full 4 KiB tmpfs over
+    ...    /var/lib/servod: ENOSPC). servod sends its set back (exit 8, the
+    ...    reason): the servo (param get, servo.period_us), servod (status)
+    ...    and the file all still say 1000 and the exchange runs. Before,
+    ...    the servo kept 2000 while servod kept 1000.
+    [Teardown]    Execute Shell Command    umount /var/lib/servod    expected_rc=any
+    Param Should Be    cycle_period_us    1000
+    Execute Shell Command    cp /var/lib/servod/params /tmp/params.keep && mount -t tmpfs -o size=4k servod-full /var/lib/servod && cp /tmp/params.keep /var/lib/servod/params
+    Execute Shell Command    dd if=/dev/zero of=/var/lib/servod/fill bs=1024 count=8 2>/dev/null    expected_rc=any
+    ${out}=    Ampctl    param set cycle_period_us 2000    expected_rc=8
+    Should Contain    ${out}    No space left on device
+    Should Contain    ${out}    the servo set back to cycle_period_us=1000: nothing changed
+    Param Should Be    cycle_period_us    1000
+    ${st}=    Ampctl    status
+    Should Contain    ${st}    period_us=1000 axes=
+    ${s}=    Stats
+    Should Be Equal As Integers    ${s}[servo.period_us]    1000
+    ${file}=    Execute Shell Command    cat /var/lib/servod/params
+    Should Contain    ${file}    cycle_period_us 1000
+    ${r}=    Exchange Window    1
+    Exchange Should Run    ${r}
+
 Faulted Then Hung Firmware Is Detected And Recovered
     [Documentation]    Issue 13, item 3: the firmware writes FAULT into its
     ...    servo line, then hangs. servod's watchdog keeps watching whatever
