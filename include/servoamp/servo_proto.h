@@ -77,6 +77,12 @@ enum sp_debug {
 	 * interrupt enabled, targeted at this core and never cleared (a level
 	 * storm from a misrouted or misconfigured source). */
 	SP_DEBUG_STRAY_IRQ = 8u,
+	/* The next cycle interrupt takes a data abort (the SVC stack's guard
+	 * page) right after the firmware acknowledged it at the GIC, before
+	 * its latency probe: CRSH as SP_DEBUG_CRASH, with the interrupt
+	 * active. A stop and a new start must find the CPU interface idle and
+	 * the cycle running. Refused (SP_E_STATE) without the MMU. */
+	SP_DEBUG_IRQ_ABORT = 9u,
 };
 
 /* Application error statuses (struct amp_msg.status), beside amp_lib's
@@ -210,6 +216,13 @@ struct sp_status {
 	uint32_t irq_disabled;
 	uint32_t irq_disabled_last;
 	uint32_t period_refused;	/* cycle_period_us values refused (SP_E_OVERLOAD) */
+	/* The firmware's GIC CPU interface at its start: interrupts an earlier
+	 * run left active there and this start completed, and the running
+	 * priority left after that: 0xff (idle) or, if the interface stays
+	 * busy, no interrupt at or below that priority is ever taken (the
+	 * trace says which; only a reset of the GIC clears it). */
+	uint32_t irq_drained;
+	uint32_t irq_busy_prio;
 };
 
 /* ---- periodic records ----------------------------------------------------- */

@@ -158,10 +158,11 @@ static int req_resume(struct servod *sd, struct out *o, int argc, char **argv, c
 }
 SERVOD_REQUEST("resume", req_resume);
 
-/* "debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US": the
+/* "debug hang|crash|fault|badparam|stack|overload|stray-irq|irq-abort|slow US": the
  * servo hangs, crashes, faults and hangs, gives one out-of-range parameter
  * answer, overflows its SVC stack into the guard page (a crash), runs its
- * cycle handlers back to back, gets a stray level interrupt, or takes US
+ * cycle handlers back to back, gets a stray level interrupt, faults right
+ * after acknowledging a cycle interrupt (a crash with it active), or takes US
  * microseconds longer per cycle handler, on purpose (tests). */
 static int req_debug(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
 {
@@ -203,8 +204,10 @@ static int req_debug(struct servod *sd, struct out *o, int argc, char **argv, ch
 		w = SP_DEBUG_OVERLOAD;
 	else if (argc == 2 && !strcmp(argv[1], "stray-irq"))
 		w = SP_DEBUG_STRAY_IRQ;
+	else if (argc == 2 && !strcmp(argv[1], "irq-abort"))
+		w = SP_DEBUG_IRQ_ABORT;
 	else {
-		snprintf(msg, n, "usage: debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US");
+		snprintf(msg, n, "usage: debug hang|crash|fault|badparam|stack|overload|stray-irq|irq-abort|slow US");
 		return SE_USAGE;
 	}
 	return simple_command(sd, o, argv[0], SP_CMD_DEBUG, w, 4, msg, n);

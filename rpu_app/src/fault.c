@@ -8,6 +8,11 @@
  * then keeps honouring the cooperative stop: on STOP it releases its
  * interrupts, stops its timer and parks like a normal stop, so a crashed
  * firmware can be stopped and restarted without a reset.
+ * Interrupts acknowledged and not yet completed when the fault came (a
+ * fault in a handler, or right after the acknowledge) are completed at
+ * once (irq_complete_all): none stays active in the CPU interface, where
+ * it would block every interrupt at or below its priority for good, also
+ * after a restart.
  */
 #include <stdint.h>
 
@@ -30,6 +35,8 @@ static volatile uint32_t in_fault;
 
 void fault_report(uint32_t kind, const uint32_t *frame)
 {
+	uint32_t ids[8], n;
+
 	/* frame: spsr, r0..r12, return address (faulting instruction). */
 	mmio_write32(BOARD_STOP_STATUS_ADDR, ZSR_STATUS_CRASHED);
 	dsb();
@@ -55,9 +62,14 @@ void fault_report(uint32_t kind, const uint32_t *frame)
 				   (unsigned)frame[1 + i], (unsigned)(i + 1u < 13u ? frame[2 + i] : 0u),
 				   (unsigned)(i + 2u < 13u ? frame[3 + i] : 0u),
 				   (unsigned)(i + 3u < 13u ? frame[4 + i] : 0u));
+		n = irq_complete_all(ids, sizeof(ids) / sizeof(ids[0]));
+		for (uint32_t i = 0; i < n && i < sizeof(ids) / sizeof(ids[0]); i++)
+			log_printf("FAULT: completed irq %u (acknowledged, in service at the fault)\n",
+				   (unsigned)ids[i]);
 		log_printf("FAULT: waiting for STOP at %p\n", (void *)(uintptr_t)BOARD_STOP_CONTROL_ADDR);
 		log_flush();
 	}
+	(void)irq_complete_all(0, 0);	/* a fault in the fault report: once more */
 	for (;;) {
 		if (mmio_read32(BOARD_STOP_CONTROL_ADDR) == ZSR_CTRL_STOP) {
 			in_fault = 0;

@@ -11,17 +11,21 @@
  *    must change (race window documented in rpu_app/README.md);
  *  - SPIs target this core only (ITARGETSR = 1 << MPIDR.Aff0, 0x02 on
  *    CPU1), never both cores;
- *  - enable only this core's CPU interface (banked GICC registers).
+ *  - enable only this core's CPU interface (banked GICC registers);
+ *  - complete (EOIR) only interrupts this core acknowledged: at start,
+ *    those an earlier run left active (gic_drain_own_active).
  */
 #include "arch.h"
 #include "board.h"
 #include "gic.h"
 
 #define GICD_CTLR        0x000u
+#define GICD_TYPER       0x004u
 #define GICD_ISENABLER   0x100u
 #define GICD_ICENABLER   0x180u
 #define GICD_ISPENDR     0x200u
 #define GICD_ICPENDR     0x280u
+#define GICD_ISACTIVER   0x300u	/* GICv1: read-only active bits (ICDABR) */
 #define GICD_IPRIORITYR  0x400u
 #define GICD_ITARGETSR   0x800u
 #define GICD_ICFGR       0xc00u
@@ -119,4 +123,74 @@ void gic_sgi_self(uint32_t id)
 	dsb();
 	/* TargetListFilter = 0b10: this core only. */
 	mmio_write32(D(GICD_SGIR), (2u << 24) | (id & 15u));
+}
+
+static int gic_active(uint32_t id)
+{
+	return (mmio_read32(D(GICD_ISACTIVER + 4u * (id / 32u))) >> (id & 31u)) & 1u;
+}
+
+/* Active and this core's to complete: an SGI or PPI (banked: this core's
+ * own), or an SPI targeted at this core alone (no other core can have
+ * acknowledged it; Linux never targets an SPI of its own at this core). */
+static int gic_own_active(uint32_t id)
+{
+	if (!gic_active(id))
+		return 0;
+	return id < 32u || mmio_read8(D(GICD_ITARGETSR + id)) == (uint8_t)(1u << mpidr_cpu());
+}
+
+static uint32_t gic_num_irqs(void)
+{
+	uint32_t n = 32u * ((mmio_read32(D(GICD_TYPER)) & 0x1fu) + 1u);
+
+	return n < 1020u ? n : 1020u;
+}
+
+void gic_drain_own_active(struct gic_drain *dr)
+{
+	uint32_t nirq = gic_num_irqs();
+
+	dr->rpr_entry = gic_running_priority();
+	dr->n = 0;
+	dr->still_active = 0;
+	/* Innermost first: an interrupt preempts only interrupts of lower
+	 * priority, so the active one with the highest priority (lowest
+	 * value) was acknowledged last and is completed first, as the GIC
+	 * requires (GICv1/v2: EOIs in the reverse order of the acknowledges;
+	 * GICv1 has no ICACTIVER to clear an active bit otherwise). */
+	while (dr->n < GIC_DRAIN_MAX && gic_running_priority() != 0xffu) {
+		uint32_t best = nirq, best_prio = 0x100u;
+
+		for (uint32_t id = 0; id < nirq; id++) {
+			uint32_t p;
+
+			if (!gic_own_active(id))
+				continue;
+			p = mmio_read8(D(GICD_IPRIORITYR + id));
+			if (p < best_prio) {
+				best = id;
+				best_prio = p;
+			}
+		}
+		if (best == nirq)
+			break;	/* busy, but with nothing of this core's active */
+		/* An SGI's EOIR names its source: this core's own SGIs are sent
+		 * to itself (gic_sgi_self). */
+		dsb();
+		gic_eoi(best < 16u ? best | (mpidr_cpu() << 10) : best);
+		dsb();
+		dr->id[dr->n] = best;
+		dr->prio[dr->n] = best_prio;
+		dr->n++;
+		if (gic_active(best))
+			break;	/* the EOI did not complete it */
+	}
+	dr->rpr_left = gic_running_priority();
+	for (uint32_t id = 0; id < nirq; id++) {
+		if (gic_own_active(id)) {
+			dr->still_active++;
+			dr->still_last = id;
+		}
+	}
 }

@@ -24,4 +24,24 @@ void gic_eoi(uint32_t iar);
 uint32_t gic_running_priority(void);
 void gic_sgi_self(uint32_t id);
 
+/*
+ * Start: complete the interrupts an earlier run of the firmware left active
+ * in this core's CPU interface (acknowledged, never completed: a fault
+ * before the record, a reset without a stop), so that its running priority
+ * is idle (0xff) again; else nothing at or below it is ever taken. Only
+ * what this core may complete: its banked SGIs/PPIs and the SPIs targeted
+ * at it alone; innermost (highest priority) first.
+ */
+#define GIC_DRAIN_MAX 8u
+struct gic_drain {
+	uint32_t rpr_entry;	/* running priority found (0xff: idle) */
+	uint32_t n;		/* interrupts completed, in id[]/prio[] in order */
+	uint32_t id[GIC_DRAIN_MAX];
+	uint32_t prio[GIC_DRAIN_MAX];
+	uint32_t rpr_left;	/* running priority after (0xff: idle) */
+	uint32_t still_active;	/* own interrupts still active after */
+	uint32_t still_last;	/* the last of them (highest ID) */
+};
+void gic_drain_own_active(struct gic_drain *dr);
+
 #endif

@@ -5,6 +5,7 @@
 #include "arch.h"
 #include "gic.h"
 #include "irq.h"
+#include "mmu.h"
 
 #ifndef IRQ_NESTING
 #define IRQ_NESTING 1
@@ -28,8 +29,15 @@ struct irq_desc {
 static struct irq_desc idt[IRQ_MAX_ID];
 static volatile uint32_t nest;
 static uint32_t nest_max;
-static uint32_t in_service[NEST_MAX];	/* IAR values, outermost first */
+/* IAR values acknowledged and not yet completed, outermost first; written
+ * right after the acknowledge, before anything that can fault, so that
+ * every path (irq_release_all, the fault handler) completes them. */
+static volatile uint32_t in_service[NEST_MAX];
 static uint32_t spurious, unhandled, disabled, disabled_last;
+/* Debug (SP_DEBUG_IRQ_ABORT): ID + 1 of the interrupt whose next dispatch
+ * faults right after its acknowledge; 0: off. The QEMU tests without Linux
+ * write it through the gdbstub by symbol. Cleared by irq_init. */
+volatile uint32_t irq_debug_abort;
 
 void irq_init(void)
 {
@@ -38,6 +46,22 @@ void irq_init(void)
 	nest = 0;
 	nest_max = 0;
 	spurious = unhandled = disabled = disabled_last = 0;
+	irq_debug_abort = 0;
+}
+
+int irq_debug_abort_next(uint32_t id)
+{
+	if (id >= IRQ_MAX_ID || !mmu_enabled())
+		return -1;	/* no guard page: nothing would fault */
+	irq_debug_abort = id + 1u;
+	return 0;
+}
+
+/* The access a stack overflow would make: a data abort on the SVC stack's
+ * guard page (mmu.c), taken inside the dispatcher. */
+static __attribute__((noinline)) void irq_debug_fault(void)
+{
+	mmio_write32(mmu_stack_guard_start(), 0);
 }
 
 int irq_register(uint32_t id, irq_handler_t handler, irq_clear_t clear,
@@ -98,14 +122,35 @@ void irq_release_all(void)
 			idt[id].enabled = 0;
 		}
 	}
-	/* Interrupts left active (e.g. a fault inside a handler): complete
-	 * them innermost first so the CPU interface is idle on restart. */
-	while (nest) {
-		nest--;
-		if (nest < NEST_MAX)
-			gic_eoi(in_service[nest]);
-	}
+	(void)irq_complete_all(0, 0);
 	irq_restore(flags);
+}
+
+uint32_t irq_complete_all(uint32_t *ids, uint32_t max)
+{
+	uint32_t flags = irq_save(), n = 0;
+
+	/* Interrupts left active (a fault inside a handler or right after
+	 * the acknowledge, a stop from a handler): complete them innermost
+	 * first (the reverse order of their acknowledge, as the GIC wants)
+	 * so the CPU interface is idle on restart. */
+	while (nest) {
+		uint32_t i = nest - 1u;
+
+		if (i < NEST_MAX) {
+			uint32_t iar = in_service[i];
+
+			dsb();
+			gic_eoi(iar);
+			if (n < max)
+				ids[n] = iar & 0x3ffu;
+			n++;
+		}
+		nest = i;
+	}
+	dsb();
+	irq_restore(flags);
+	return n;
 }
 
 void irq_get_stats(uint32_t id, struct irq_stats *st)
@@ -157,15 +202,25 @@ void irq_dispatch(void)
 		spurious++;
 		return;		/* no EOI for a spurious ID */
 	}
+	/* Recorded first: from here on a fault (the latency probe, the
+	 * handler, a stack overflow) leaves a record the fault handler and
+	 * irq_release_all complete; the slot is written before the count
+	 * covers it. */
+	depth = nest + 1u;
+	if (depth <= NEST_MAX)
+		in_service[depth - 1u] = iar;
+	compiler_barrier();
+	nest = depth;
+	if (depth > nest_max)
+		nest_max = depth;
+
+	if (irq_debug_abort == id + 1u) {
+		irq_debug_abort = 0;
+		irq_debug_fault();
+	}
 	d = id < IRQ_MAX_ID ? &idt[id] : NULL;
 	if (d && d->latency)
 		lat = d->latency(d->arg);
-
-	depth = ++nest;
-	if (depth <= NEST_MAX)
-		in_service[depth - 1u] = iar;
-	if (depth > nest_max)
-		nest_max = depth;
 
 	if (!d || !d->registered) {
 		/* Not ours, yet routed to this core: count it, disable it at

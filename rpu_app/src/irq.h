@@ -10,12 +10,16 @@
  * the trigger type; registered at init, dispatched by irq_dispatch().
  *
  * Order in the dispatcher (IRQs masked unless stated):
- *   IAR read -> latency probe -> nesting count +1 ->
+ *   IAR read -> recorded as in service (nesting count +1) -> latency probe ->
  *   edge:  clear(), then the handler with IRQs unmasked (a new edge during
  *          the handler is latched again by the GIC, none is lost);
  *   level: the handler with IRQs unmasked, then clear() (the line must be
  *          low before EOI or the GIC re-takes it at once);
  *   statistics -> nesting count -1 -> EOI.
+ * The record comes before anything that can fault: an interrupt
+ * acknowledged and not completed is always in the record, and the fault
+ * handler and the stop path complete it (irq_complete_all), so no
+ * interrupt stays active in this core's CPU interface across a restart.
  * An interrupt taken without a registered handler (not ours, yet routed to
  * this core) is counted, disabled at the distributor (PPI/SPI; SGIs only
  * counted) and completed: a level source nobody clears cannot storm.
@@ -52,6 +56,15 @@ int irq_set_latency_probe(uint32_t id, irq_latency_t probe);
 int irq_enable(uint32_t id);
 /* Stop path: disable every registered interrupt, EOI any still in service. */
 void irq_release_all(void);
+/* EOI every interrupt acknowledged and not completed (innermost first);
+ * their IDs in ids[0..max), innermost first; returns how many. IRQ-safe,
+ * also for the fault handler. */
+uint32_t irq_complete_all(uint32_t *ids, uint32_t max);
+
+/* Debug (SP_DEBUG_IRQ_ABORT): the next dispatch of id takes a data abort
+ * (the SVC stack's guard page) right after its acknowledge. -1 without the
+ * MMU (no guard page) or for an id out of range. */
+int irq_debug_abort_next(uint32_t id);
 
 void irq_get_stats(uint32_t id, struct irq_stats *st);
 uint32_t irq_nest_max(void);

@@ -91,7 +91,7 @@ const char *link_backend(void)
 static struct amp_servo amp;
 static volatile int attached;
 static volatile uint32_t local_hb, hang, crash_req, linux_cycle, bad_answer, fault_req, stack_req;
-static uint32_t next_try, stack_pending;
+static uint32_t next_try, stack_pending, irq_abort_pending;
 static int last_err;
 static struct amp_fb_axis fb[AMP_MAX_AXES];
 
@@ -113,7 +113,7 @@ void link_init(void)
 {
 	attached = 0;
 	local_hb = hang = crash_req = linux_cycle = bad_answer = fault_req = stack_req = 0;
-	stack_pending = 0;
+	stack_pending = irq_abort_pending = 0;
 	next_try = 0;
 	last_err = 1;	/* nothing reported yet */
 	amp = (struct amp_servo){ 0 };
@@ -380,6 +380,8 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		s.irq_disabled = irq_disabled();
 		s.irq_disabled_last = irq_disabled_last();
 		s.period_refused = period_refused;
+		s.irq_drained = start_irq_drained();
+		s.irq_busy_prio = start_irq_busy_prio();
 		for (uint32_t i = 0; i < sizeof(s) / 4u; i++)
 			out[i] = ((uint32_t *)&s)[i];
 		*len = sizeof(s);
@@ -426,6 +428,11 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 				return SP_E_STATE;	/* no guard page: it would be silent */
 			log_printf("debug: SVC stack overflow requested: the next cycle handler recurses into the guard page\n");
 			stack_pending = 1;	/* armed after the answer (link_poll) */
+		} else if (what == SP_DEBUG_IRQ_ABORT) {
+			if (!mmu_enabled())
+				return SP_E_STATE;	/* no guard page to fault on */
+			log_printf("debug: abort requested: the next cycle interrupt faults right after its acknowledge\n");
+			irq_abort_pending = 1;	/* armed after the answer (link_poll) */
 		} else if (what == SP_DEBUG_BADPARAM) {
 			log_printf("debug: the next parameter answer carries an out-of-range value\n");
 			bad_answer = 1;
@@ -471,6 +478,10 @@ void link_poll(uint32_t cycle, const struct link_stats *ls)
 		if (stack_pending) {
 			stack_pending = 0;
 			stack_req = 1;	/* the next cycle handler overflows */
+		}
+		if (irq_abort_pending) {
+			irq_abort_pending = 0;
+			(void)irq_debug_abort_next(BOARD_CYCLE_IRQ);
 		}
 		if (fault_req) {
 			fault_req = 0;

@@ -46,6 +46,7 @@ static uint32_t period_min, period_max, overruns, missed;
 static volatile uint32_t sgi_stamp, sgi_seen;
 static uint32_t nest_ok, nest_fail;
 static uint64_t gt_start;
+static struct gic_drain drain;	/* what the start found active (gic.h) */
 
 static void nest_test_handler(void *arg)
 {
@@ -195,6 +196,46 @@ __attribute__((noreturn)) void servo_quiesce_and_park(void)
 	cpu_park(BOARD_PARK_ADDR, BOARD_STOP_STATUS_ADDR, ZSR_STATUS_PARKED);
 }
 
+uint32_t start_irq_drained(void)
+{
+	return drain.n;
+}
+
+uint32_t start_irq_busy_prio(void)
+{
+	return drain.rpr_left;
+}
+
+/* An earlier run may have left interrupts active in this core's CPU
+ * interface (an acknowledge never completed: a fault before the dispatcher
+ * recorded it, a reset without a stop). Complete them, say so; if the
+ * interface stays busy, say it loudly (here, and in SP_CMD_STATUS). */
+static void drain_cpu_interface(void)
+{
+	char line[200];
+	int len;
+
+	gic_drain_own_active(&drain);
+	if (drain.rpr_entry != 0xffu) {
+		len = log_snprintf(line, sizeof(line), "gic: CPU interface busy at priority %02x on entry:",
+				   (unsigned)drain.rpr_entry);
+		for (uint32_t i = 0; i < drain.n && len > 0 && (uint32_t)len < sizeof(line); i++)
+			len += log_snprintf(line + len, sizeof(line) - (uint32_t)len, "%s irq %u (prio %02x)",
+					    i ? "," : " completed", (unsigned)drain.id[i],
+					    (unsigned)drain.prio[i]);
+		log_printf("%s%s; now %02x\n", line, drain.n ? "" : " nothing of this core's active",
+			   (unsigned)drain.rpr_left);
+	}
+	if (drain.rpr_left != 0xffu)
+		log_printf("error: gic: CPU interface still busy at priority %02x: no interrupt at or below it "
+			   "is ever taken (the cycle interrupt is at %02x) until the GIC is reset\n",
+			   (unsigned)drain.rpr_left, (unsigned)BOARD_CYCLE_PRIORITY);
+	if (drain.still_active)
+		log_printf("error: gic: %u interrupt(s) of this core still active (the last: irq %u), never "
+			   "taken again until the GIC is reset\n",
+			   (unsigned)drain.still_active, (unsigned)drain.still_last);
+}
+
 static void banner(void)
 {
 	log_printf("servoamp rpu_app %s (%s, built %s, gcc %s) board=%s variant=%s\n",
@@ -244,9 +285,7 @@ __attribute__((noreturn)) void servo_main(void)
 	if (!gic_dist_enabled())
 		log_printf("warning: GIC distributor disabled (owned by Linux, not enabled here); "
 			   "no interrupt until it is\n");
-	if (gic_running_priority() != 0xffu)
-		log_printf("warning: CPU interface busy at priority %02x on entry\n",
-			   (unsigned)gic_running_priority());
+	drain_cpu_interface();
 	gic_cpu_init(GIC_PMR, GIC_BPR);
 
 	if (irq_register(BOARD_CYCLE_IRQ, cycle_handler, ttc_cycle_clear,

@@ -18,4 +18,10 @@ __attribute__((noreturn)) void cpu_park(uint32_t park, uint32_t status_addr, uin
 uint32_t svc_stack_used(void);
 uint32_t svc_stack_size(void);
 
+/* GIC CPU interface at this start (main.c, gic_drain_own_active): the
+ * interrupts an earlier run left active and this start completed, and the
+ * running priority left after that (0xff: idle). */
+uint32_t start_irq_drained(void);
+uint32_t start_irq_busy_prio(void);
+
 #endif
