@@ -726,8 +726,7 @@ class QemuMachine:
 
     def dump_state(self, reason: str = "requested") -> Path | None:
         """Write every vCPU's registers (QMP ``info registers``, the PC and
-        LR symbolised), CPU0's GIC CPU interface (running priority, highest
-        pending) and the distributor's active bits into ``vcpu-state.txt``
+        LR symbolised, and a scan of the stack for code addresses) into ``vcpu-state.txt``
         in the run directory (appended, so several dumps of one run are
         kept), with the VM paused meanwhile; mark the run failed so the
         logs are kept. Called by the UARTs when a wait times out."""
@@ -735,9 +734,12 @@ class QemuMachine:
             return None
         self._failed = True
         out = self.run_dir / "vcpu-state.txt"
-        text = vcpu_report(self, reason)
+        # two snapshots a host second apart: a PC that moves is a livelock
+        # or a busy loop, one that does not is a deadlock or a halted CPU
         with out.open("a") as f:
-            f.write(text)
+            f.write(vcpu_report(self, reason))
+            time.sleep(1.0)
+            f.write(vcpu_report(self, reason + " (1 s later)"))
         _log(f"{reason}: vCPU state in {out}")
         return out
 
@@ -869,7 +871,7 @@ class Symbols:
         res = subprocess.run([nm, "-n", str(elf)], text=True, capture_output=True)
         for line in res.stdout.splitlines():
             parts = line.split()
-            if len(parts) == 3 and parts[1] in "tTwWaA" and not parts[2].startswith("$"):
+            if len(parts) == 3 and parts[1] in "tTwW" and not parts[2].startswith("$"):
                 self.addrs.append(int(parts[0], 16))
                 self.names.append(parts[2])
 
@@ -885,7 +887,7 @@ class Symbols:
         import bisect
 
         i = bisect.bisect_right(self.addrs, addr) - 1
-        if i < 0 or addr - self.addrs[i] > 0x100000:
+        if i < 0 or addr - self.addrs[i] > 0x10000:
             return None
         return f"{self.names[i]}+{addr - self.addrs[i]:#x}"
 
@@ -898,7 +900,12 @@ def _symbol_files(cpu: int) -> list[Path]:
     return sorted((REPO / "build/rpu_app").glob("*/servo.elf"))
 
 
-def symbolise(cpu: int, addr: int) -> str:
+def symbolise(cpu: int, addr: int, board: Board | None = None) -> str:
+    if board is not None:
+        stub = board.addr("load", "boot_stub")
+        if stub <= addr < stub + 0x1000:
+            park = board.addr("load", "park_loop")
+            return f"boot stub{' (park loop)' if addr >= park else ''}+{addr - stub:#x}"
     for f in _symbol_files(cpu):
         syms = Symbols.of(f)
         hit = syms.lookup(addr) if syms else None
@@ -927,21 +934,26 @@ def vcpu_report(machine: QemuMachine, reason: str) -> str:
             found = dict((int(n), int(v, 16)) for n, v in _REG.findall(regs))
             for n, name in ((15, "pc"), (14, "lr")):
                 if n in found:
-                    lines.append(f"{name} {found[n]:08x} = {symbolise(cpu, found[n])}")
-        # CPU0's GIC CPU interface (the monitor reads as CPU0; RPR and HPPIR
-        # have no side effects, IAR would acknowledge and is never read) and
-        # the distributor's active and pending bits.
-        gicc = machine.board.data.get("gic", {}).get("cpu", 0xF8F00100)
-        gicd = machine.board.data.get("gic", {}).get("dist", 0xF8F01000)
-        try:
-            lines.append("--- GIC (as seen by CPU0)")
-            lines.append("GICC_RPR " + machine.hmp(f"xp /1wx {gicc + 0x14:#x}").strip())
-            lines.append("GICC_HPPIR " + machine.hmp(f"xp /1wx {gicc + 0x18:#x}").strip())
-            lines.append("GICD_ISACTIVER " + machine.hmp(f"xp /4wx {gicd + 0x300:#x}").strip())
-            lines.append("GICD_ISPENDR " + machine.hmp(f"xp /4wx {gicd + 0x200:#x}").strip())
-            lines.append("GICD_ISENABLER " + machine.hmp(f"xp /4wx {gicd + 0x100:#x}").strip())
-        except QemuError as e:
-            lines.append(f"(GIC: {e})")
+                    lines.append(f"{name} {found[n]:08x} = {symbolise(cpu, found[n], machine.board)}")
+            # a stack scan: words near SP that point into code, innermost
+            # first (a crude backtrace; the monitor reads through this CPU's
+            # MMU). MMIO, the GIC's included, is never read from the
+            # monitor: QEMU's GIC model needs a current CPU and the monitor
+            # connection dies.
+            if 13 in found:
+                try:
+                    words = machine.hmp(f"x /96wx {found[13]:#x}", cpu=cpu)
+                except QemuError as e:
+                    words = ""
+                    lines.append(f"(stack: {e})")
+                hits = []
+                body = " ".join(ln.split(":", 1)[-1] for ln in words.splitlines())
+                for w in re.findall(r"0x([0-9a-fA-F]{8})\b", body):
+                    sym = symbolise(cpu, int(w, 16))
+                    if sym != "?" and "+0x0 " not in sym and w.lower() != "ffffffff":
+                        hits.append(f"  {w} {sym}")
+                lines.append(f"stack scan from sp {found[13]:08x} ({len(hits)} code addresses):")
+                lines.extend(hits[:40])
     finally:
         if paused:
             try:
