@@ -112,13 +112,21 @@ uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed)
 
 int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
 		   uint32_t naxes_word, uint32_t pub, uint32_t last, uint32_t epoch,
-		   struct amp_rx_info *rx, struct amp_stats *st)
+		   uint32_t *resync, struct amp_rx_info *rx, struct amp_stats *st)
 {
 	const uint32_t *rec = (const uint32_t *)bufs + (pub & 1u) * words;
 	const uint32_t *t = tmp;
 	int take = 0;
 
 	rx->status = amp__rx_classify(pub, last, &rx->missed);
+	/* Resynchronising (the peer attached anew): its sequence owes
+	 * nothing to the last one read, so the published one names the
+	 * record to check, ahead, behind or even equal, and its distance
+	 * is no count of skipped records. */
+	if (*resync) {
+		rx->status = AMP_RX_FRESH;
+		rx->missed = 0;
+	}
 	if (rx->status == AMP_RX_FRESH || rx->status == AMP_RX_MISSED) {
 		if (amp__rec_read(tmp, rec, words, end, pub) != 0)
 			rx->status = AMP_RX_TORN;
@@ -126,9 +134,15 @@ int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
 			rx->status = AMP_RX_INVALID;
 		else
 			take = 1;
-		if (!take)
+		if (!take) {
 			rx->missed = 0;
+			/* the last sequence read, not yet rewritten: nothing new */
+			if (pub == last)
+				rx->status = AMP_RX_STALE;
+		}
 	}
+	if (take)
+		*resync = 0;
 	rx->seq = take ? pub : last;
 	switch (rx->status) {
 	case AMP_RX_FRESH: st->fresh++; break;

@@ -114,6 +114,35 @@ int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit)
 	return AMP_OK;
 }
 
+/*
+ * The servo's attach: its first in this epoch (peer_seen), or a new one
+ * (attach_count changed, read once). Either gives it a fresh watchdog
+ * and resynchronises the feedback: the new attach's sequence owes
+ * nothing to the one read so far (a stray write to fb_pub while the servo
+ * was down would otherwise leave every record "reordered" for as many
+ * cycles as the sequence went back). Before the feedback is read, so that
+ * the cycle that sees the attach already takes its first record.
+ */
+static void check_attach(struct amp_linux *l, int peer)
+{
+	uint32_t attach;
+	int first = 0;
+
+	if (!l->peer_seen) {
+		if (peer != AMP_OK && peer != AMP_E_PEER_ERROR)
+			return;
+		l->peer_seen = 1;
+		first = 1;
+	}
+	attach = RD_ACQ(&l->ocm->servo_line.attach_count);	/* read once */
+	if (attach != l->servo_attach || first) {
+		l->servo_attach = attach;
+		l->wd.primed = 0;	/* a restarted servo gets a fresh watchdog */
+		l->fb_resync = 1;
+		l->fb_bad = 0;
+	}
+}
+
 static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx)
 {
 	struct amp_ocm *o = l->ocm;
@@ -123,9 +152,16 @@ static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx)
 	AMP_PORT_CACHE_INVAL(&o->servo_line, sizeof(o->servo_line));
 	pub = RD_ACQ(&o->servo_line.fb_pub);
 	if (amp__rx_record(&f, o->fb, FB_WORDS, FB_END, FB_NAXES, pub, l->fb_seq,
-			   l->epoch, rx, &l->st)) {
+			   l->epoch, &l->fb_resync, rx, &l->st)) {
 		l->fb = f;
 		l->fb_seq = pub;
+		l->fb_bad = 0;
+	} else if (rx->status == AMP_RX_INVALID || rx->status == AMP_RX_TORN || l->fb_bad) {
+		/* from a refused read on, every cycle without a record
+		 * taken counts (bounded: the limit is at most
+		 * AMP_WD_LIMIT_MAX) */
+		if (l->fb_bad < AMP_WD_LIMIT_MAX)
+			l->fb_bad++;
 	}
 }
 
@@ -135,7 +171,7 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	struct amp_rx_info tmp;
 	struct amp_cmd_record c = { 0 };
 	struct amp_ocm *o;
-	uint32_t seq, sem, attach;
+	uint32_t seq, sem;
 	int peer;
 
 	if (!l || !l->ocm || n_axes > AMP_MAX_AXES || (n_axes && !axes))
@@ -150,6 +186,7 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	 * servo polls changes once per cycle */
 	l->cycle++;
 	l->st.cycles++;
+	check_attach(l, peer);
 
 	/* 2. semaphore: still busy means the servo has not taken the last
 	 * commands (it is late or absent) */
@@ -193,23 +230,21 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	AMP_PORT_SIGNAL();
 
 	/* The watchdog watches the heartbeat from the servo's first attach
-	 * in this epoch on, whatever its state and epoch words say since: a
-	 * servo that writes FAULT (or garbage) and hangs is a stall like any
-	 * other. Before that attach nothing is a stall (the servo may not
-	 * have started yet). */
-	if (peer == AMP_OK || peer == AMP_E_PEER_ERROR)
-		l->peer_seen = 1;
+	 * in this epoch on (check_attach), whatever its state and epoch
+	 * words say since: a servo that writes FAULT (or garbage) and hangs
+	 * is a stall like any other. Before that attach nothing is a stall
+	 * (the servo may not have started yet). A servo that beats but whose
+	 * records are refused for wd_limit cycles is as good as stalled:
+	 * AMP_E_FEEDBACK, never AMP_OK (or a peer error, whose feedback
+	 * callers still use) over a run of refused reads. */
 	if (!l->peer_seen) {
 		l->wd.primed = 0;
 		return peer;
 	}
-	attach = RD(&o->servo_line.attach_count);	/* read once */
-	if (attach != l->servo_attach) {
-		l->servo_attach = attach;
-		l->wd.primed = 0;	/* a restarted servo gets a fresh watchdog */
-	}
 	if (amp_wd_feed(&l->wd, RD(&o->servo_line.heartbeat)) == AMP_E_STALLED)
 		return AMP_E_STALLED;
+	if (l->fb_bad >= l->wd.limit)
+		return AMP_E_FEEDBACK;
 	return peer;
 }
 

@@ -40,10 +40,22 @@ int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size)
 	 * word: a stray write to it must not make a restart look like a
 	 * first attach (attach_count back to 1, which Linux takes for the
 	 * attach it already recovered, feedback sequence back to 0, which
-	 * Linux takes for reordered records). */
+	 * Linux takes for reordered records). Neither side depends on the
+	 * sequence words being right, though: a stray write to fb_pub while
+	 * the servo was down is caught up by Linux, which resynchronises on
+	 * the new attach_count (the first record of this attach is taken
+	 * whatever its sequence), and the servo does the same with the
+	 * commands. So that Linux can only take a record of this attach, the
+	 * records of earlier ones are invalidated first (epoch word 0). */
 	s->fb_seq = RD(&sl->fb_pub);
 	s->heartbeat = RD(&sl->heartbeat);
 	s->cmd_seq = RD_ACQ(&o->linux_line.cmd_pub);
+	s->cmd_resync = 1;
+	for (uint32_t i = 0; i < 2u; i++) {
+		WR(&o->fb[i].epoch, 0);
+		AMP_PORT_CACHE_CLEAN(&o->fb[i].epoch, 4u);
+	}
+	AMP_PORT_WMB();
 	WR(&sl->attach_count, RD(&sl->attach_count) + 1u);
 	WR(&sl->fault, 0);
 	WR(&sl->cmd_stale, 0);
@@ -109,7 +121,7 @@ int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_i
 
 	/* 3. switch the command buffer: read the newest commands */
 	if (amp__rx_record(&c, o->cmd, CMD_WORDS, CMD_END, CMD_NAXES, pub, s->cmd_seq,
-			   s->epoch, rx, &s->st)) {
+			   s->epoch, &s->cmd_resync, rx, &s->st)) {
 		s->cmd = c;
 		s->cmd_seq = pub;
 	}

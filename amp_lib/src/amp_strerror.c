@@ -16,6 +16,7 @@ const char *amp_strerror(int err)
 	case AMP_E_BUSY: return "busy";
 	case AMP_E_NOSPC: return "payload too large";
 	case AMP_E_STALLED: return "peer stalled";
+	case AMP_E_FEEDBACK: return "no valid feedback";
 	default: return "unknown error";
 	}
 }

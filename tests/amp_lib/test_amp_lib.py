@@ -5,6 +5,7 @@ footprint budget; the transport benchmark runs (figures are not judged)."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -61,6 +62,23 @@ def test_hostile_peer_rewrites_ocm_between_reads(variant: str, request: pytest.F
     build = request.getfixturevalue(f"build_{variant}")
     out = _run([str(build / "test_amp_hostile")], timeout=60)
     assert " 0 failed" in out
+
+
+@pytest.mark.parametrize("variant", ["none", "asan", "tsan"])
+def test_reattach_resynchronises_feedback(variant: str, request: pytest.FixtureRequest) -> None:
+    """Issue 20, item 4: after 1000 cycles, a stray 0 in fb_pub while the
+    servo is down and a re-attach, feedback resumes within 2 cycles (it was
+    999 cycles of AMP_RX_INVALID with AMP_OK); every word of the region set
+    to each hostile value while the servo is down: feedback and commands
+    resume within 2 cycles, or amp_linux_cycle returns AMP_E_STALLED /
+    AMP_E_FEEDBACK within wd_limit + 2 cycles; and refused feedback reads are
+    AMP_E_FEEDBACK from the wd_limit-th on, re-attach or not."""
+    build = request.getfixturevalue(f"build_{variant}")
+    out = _run([str(build / "test_amp_resync")], timeout=300)
+    assert " 0 failed" in out
+    assert "; 0 cycles AMP_OK+INVALID" in out
+    assert re.search(r"every word: (\d+) scenarios, \d+ resumed within 2 cycles, \d+ reported an error, 0 failed",
+                     out), out
 
 
 @pytest.mark.slow

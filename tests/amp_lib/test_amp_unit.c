@@ -45,12 +45,14 @@ static void test_strerror(void)
 {
 	int codes[] = { AMP_OK, AMP_E_PEER_ABSENT, AMP_E_PEER_ERROR, AMP_E_TIMEOUT,
 			AMP_E_PROTO, AMP_E_INVAL, AMP_E_LAYOUT, AMP_E_BUSY,
-			AMP_E_NOSPC, AMP_E_STALLED };
+			AMP_E_NOSPC, AMP_E_STALLED, AMP_E_FEEDBACK };
 	size_t n = sizeof(codes) / sizeof(codes[0]);
 
-	for (size_t i = 0; i < n; i++)
+	for (size_t i = 0; i < n; i++) {
+		CHECK(strcmp(amp_strerror(codes[i]), "unknown error") != 0);
 		for (size_t j = i + 1; j < n; j++)
 			CHECK(strcmp(amp_strerror(codes[i]), amp_strerror(codes[j])) != 0);
+	}
 	CHECK(strcmp(amp_strerror(-1000), "unknown error") == 0);
 }
 

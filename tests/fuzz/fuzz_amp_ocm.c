@@ -159,16 +159,27 @@ static void op_linux_cycle(struct in *in)
 {
 	struct amp_cmd_axis ax[AMP_MAX_AXES];
 	struct amp_rx_info rx;
-	uint32_t n = u8(in) % (AMP_MAX_AXES + 1u), prev = l.fb_seq;
+	uint32_t n = u8(in) % (AMP_MAX_AXES + 1u), prev = l.fb_seq, bad = l.fb_bad;
+	uint32_t resync = l.fb_resync, attach = l.servo_attach, seen = l.peer_seen;
 	int rc;
 
 	memset(ax, 0x5a, sizeof(ax));
 	rc = amp_linux_cycle(&l, ax, n, u8(in), &rx);
 	FZ_ASSERT(rc == AMP_OK || rc == AMP_E_PEER_ABSENT || rc == AMP_E_PEER_ERROR ||
-		  rc == AMP_E_STALLED);
+		  rc == AMP_E_STALLED || rc == AMP_E_FEEDBACK);
 	check_rx(&rx, l.fb_seq);
+	/* refused reads are never AMP_OK (nor a peer error) for wd_limit
+	 * cycles: once the servo has attached, AMP_E_FEEDBACK at the latest */
+	FZ_ASSERT(l.fb_bad <= bad + 1u);
+	if (l.peer_seen && l.fb_bad >= l.wd.limit)
+		FZ_ASSERT(rc == AMP_E_STALLED || rc == AMP_E_FEEDBACK);
 	if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED) {
-		FZ_ASSERT(l.fb_seq - prev == rx.missed + 1u);
+		/* in sequence, or the first record after an attach seen now
+		 * or earlier (any sequence, FRESH) */
+		resync = resync || l.servo_attach != attach || (!seen && l.peer_seen);
+		FZ_ASSERT(l.fb_seq - prev == rx.missed + 1u ||
+			  (resync && rx.status == AMP_RX_FRESH && rx.missed == 0));
+		FZ_ASSERT(l.fb_bad == 0 && !l.fb_resync);
 		FZ_ASSERT(l.fb.epoch == l.epoch);
 		FZ_ASSERT(l.fb.seq_begin == l.fb_seq && l.fb.seq_end == l.fb_seq);
 	} else {
@@ -266,13 +277,17 @@ static void op_servo_attach(void)
 static void op_servo_rx(struct in *in)
 {
 	struct amp_rx_info rx;
-	uint32_t prev = s.cmd_seq;
+	uint32_t prev = s.cmd_seq, resync = s.cmd_resync;
 	int rc = amp_servo_cycle_rx(&s, u8(in), &rx);
 
 	FZ_ASSERT(rc == AMP_OK || rc == AMP_E_STALLED || rc == AMP_E_PEER_ABSENT);
 	check_rx(&rx, s.cmd_seq);
 	if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED) {
-		FZ_ASSERT(s.cmd_seq - prev == rx.missed + 1u);
+		/* in sequence, or the first commands after the attach (any
+		 * sequence, FRESH) */
+		FZ_ASSERT(s.cmd_seq - prev == rx.missed + 1u ||
+			  (resync && rx.status == AMP_RX_FRESH && rx.missed == 0));
+		FZ_ASSERT(!s.cmd_resync);
 		FZ_ASSERT(s.cmd.epoch == s.epoch);
 		FZ_ASSERT(s.cmd.seq_begin == s.cmd_seq && s.cmd.seq_end == s.cmd_seq);
 	} else {

@@ -31,6 +31,7 @@ enum {
 	AMP_E_BUSY = -7,	/* peer still owns the previous transaction */
 	AMP_E_NOSPC = -8,	/* payload larger than the mailbox capacity */
 	AMP_E_STALLED = -9,	/* peer heartbeat still for wd_limit cycles */
+	AMP_E_FEEDBACK = -10,	/* no feedback taken for wd_limit cycles: reads refused */
 };
 
 /* Returns a static string naming an AMP_E_* code. */
@@ -92,6 +93,8 @@ struct amp_linux {
 	uint32_t mbox_pending;	/* a request is out, answer not read */
 	uint32_t servo_attach;	/* servo attach_count last seen */
 	uint32_t peer_seen;	/* the servo attached in this epoch: watchdog armed */
+	uint32_t fb_resync;	/* a new attach seen: take its first whole record */
+	uint32_t fb_bad;	/* cycles without a record taken since a refused read */
 	struct amp_watchdog wd;
 	struct amp_stats st;
 	struct amp_fb_record fb;	/* last whole feedback */
@@ -140,10 +143,15 @@ int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit);
  * semaphore, read the feedback (into l->fb, described by rx), write the
  * commands (n_axes <= AMP_MAX_AXES), set the semaphore. Returns AMP_OK,
  * AMP_E_INVAL, AMP_E_PEER_ABSENT (servo not attached, commands still
- * published), AMP_E_PEER_ERROR (state FAULT or garbage) or AMP_E_STALLED.
- * The heartbeat watchdog runs from the servo's first attach in this epoch
- * on, whatever the servo's state word says afterwards: AMP_E_STALLED
- * (heartbeat still for wd_limit cycles) takes precedence over the rest.
+ * published), AMP_E_PEER_ERROR (state FAULT or garbage), AMP_E_STALLED or
+ * AMP_E_FEEDBACK. The heartbeat watchdog runs from the servo's first attach
+ * in this epoch on, whatever the servo's state word says afterwards:
+ * AMP_E_STALLED (heartbeat still for wd_limit cycles) takes precedence over
+ * the rest. A new attach (the servo's attach_count changed) resynchronises
+ * the feedback: its first whole record of this epoch is taken (FRESH)
+ * whatever its sequence. AMP_E_FEEDBACK, next in precedence: a read was
+ * refused (INVALID or TORN) and no record has been taken for wd_limit
+ * cycles since, however the servo beats: the link is as good as stalled.
  */
 int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		    uint32_t n_axes, uint32_t flags, struct amp_rx_info *rx);
@@ -191,6 +199,7 @@ struct amp_servo {
 	uint32_t heartbeat;
 	uint32_t fb_seq;
 	uint32_t cmd_seq;	/* last command sequence consumed */
+	uint32_t cmd_resync;	/* attached: take the first whole commands */
 	uint32_t mbox_state;	/* 0 idle, 1 request handed out */
 	uint32_t mbox_seq;
 	uint32_t mbox_cmd;
@@ -204,6 +213,10 @@ struct amp_servo {
 /*
  * Attach to the region Linux initialised: AMP_OK, AMP_E_PEER_ABSENT (no
  * valid region yet: retry later) or AMP_E_LAYOUT (built differently).
+ * The feedback records of an earlier attach are invalidated (epoch word
+ * 0), and the first whole commands of this epoch are taken whatever their
+ * sequence: nothing either side reads after an attach depends on what the
+ * sequence words held before it.
  */
 int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size);
 
