@@ -282,6 +282,15 @@ def f_hang(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
     _stall_seen(c, o, before)
 
 
+def f_irq_abort(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
+    """A data abort right after the firmware acknowledged its cycle
+    interrupt: the restarted firmware must find its GIC CPU interface idle
+    (before issue 20 item 5 the interrupt stayed active: CPU1's park loop
+    never woke, and no start succeeded again)."""
+    c.sh("ampctl debug irq-abort")
+    _stall_seen(c, o, before)
+
+
 @dataclass(frozen=True)
 class Fault:
     name: str
@@ -305,6 +314,8 @@ FAULTS: list[Fault] = [
     Fault("linux-irq-50ms", "Linux's cycle interrupt disabled at the GIC for 50 ms", f_linux_irq, False,
           held=True),
     Fault("hang", "firmware stops its cycle work and heartbeat (ampctl debug hang)", f_hang, True),
+    Fault("irq-abort", "firmware aborts right after acknowledging its cycle interrupt (ampctl debug irq-abort)",
+          f_irq_abort, True),
 ]
 
 
