@@ -6,8 +6,9 @@
  * amp_linux_cycle() (heartbeat, semaphore, feedback read, commands written,
  * semaphore set), the telemetry record, and the counters (cycle_stats.h):
  * cycles, exchanges, missed interrupts, late cycles, wake-up latency, and a
- * stall of the servo or a servo in FAULT (or with a garbled state word) for
- * wd_limit cycles, which the supervisor reports for recovery.
+ * stall of the servo, its feedback refused (AMP_E_FEEDBACK), or a servo in
+ * FAULT (or with a garbled state word) for wd_limit cycles, which the
+ * supervisor reports for recovery.
  */
 #define _GNU_SOURCE
 #include <string.h>
@@ -49,7 +50,9 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 	cycle_stats_work(st, w->lat_ns, (uint32_t)(t_done - w->t_ns), sd->period_ns);
 	if (rc == AMP_E_PEER_ABSENT) {
 		st->absent++;
-	} else if (rc == AMP_E_STALLED) {
+	} else if (rc == AMP_E_STALLED || rc == AMP_E_FEEDBACK) {
+		/* no heartbeat, or no feedback taken (every record refused)
+		 * for wd_limit cycles: both recovered as a stall */
 		if (cycle_stats_stall(st, pi.attach_count, w->t_ns))
 			atomic_store(&sd->session.stall_pending, STALL_HEARTBEAT);
 	}
