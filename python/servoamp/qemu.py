@@ -954,6 +954,24 @@ def vcpu_report(machine: QemuMachine, reason: str) -> str:
                         hits.append(f"  {w} {sym}")
                 lines.append(f"stack scan from sp {found[13]:08x} ({len(hits)} code addresses):")
                 lines.extend(hits[:40])
+        # the kernel's clock as Linux sees it: jiffies stands still across
+        # the two snapshots when CPU0's tick no longer arrives
+        vmlinux = REPO / "build/kernel/obj/vmlinux"
+        if vmlinux.exists():
+            nm = shutil.which("arm-linux-gnueabihf-nm") or "nm"
+            res = subprocess.run([nm, str(vmlinux)], text=True, capture_output=True)
+            want: dict[str, int | None] = {"jiffies": None}
+            for line in res.stdout.splitlines():
+                p = line.split()
+                if len(p) == 3 and p[2] in want:
+                    want[p[2]] = int(p[0], 16)
+            for name, addr in want.items():
+                if addr is not None:
+                    try:
+                        out = machine.hmp(f"x /1wx {addr:#x}", cpu=0)
+                        lines.append(f"{name} (CPU0) = {out.split(':', 1)[-1].strip()}")
+                    except QemuError as e:
+                        lines.append(f"({name}: {e})")
     finally:
         if paused:
             try:
