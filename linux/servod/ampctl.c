@@ -8,6 +8,8 @@
  *   ampctl [-s SOCKET] param get NAME|ID
  *   ampctl [-s SOCKET] param set NAME|ID VALUE
  *   ampctl [-s SOCKET] resume               leave SAFESTOP
+ *   ampctl [-s SOCKET] fault                the recovery state and the fault latch
+ *   ampctl [-s SOCKET] fault reset          reset a latched fault: the firmware restarted
  *   ampctl [-s SOCKET] debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US  make the firmware fail (tests)
  *   ampctl [-s SOCKET] raw CMD NBYTES [WORD...]   raw mailbox request (tests)
  *   ampctl [-s SOCKET] run FILE.nc          run a G-code program (path as servod sees it)
@@ -51,7 +53,7 @@ int main(int argc, char **argv)
 	}
 	if (i >= argc || !strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 		fprintf(stderr, "usage: ampctl [-s SOCKET] status | stats | param list | param get NAME |\n"
-				"              param set NAME VALUE | resume | debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US |\n"
+				"              param set NAME VALUE | resume | fault [reset] | debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US |\n"
 				"              raw CMD NBYTES [WORD...] | run FILE.nc | stop | -   (the request from standard input)\n");
 		return SE_USAGE;
 	}

@@ -13,7 +13,9 @@
  *   program_feed.c  the runner's feeder thread (dry run, streaming)
  *   path_error.c    a run's path and following error
  *   session.c       the session state machine
- *   supervisor.c    the supervisor: remoteproc, session, crash report, restore
+ *   supervisor.c    the supervisor: remoteproc, session, crash report, restarts,
+ *                   the fault latch ("fault"), restore
+ *   recovery.c      the bounds on recovery: restarts in a window, backoff
  *   params.c        the parameter set: file, servo, "param" request
  *   mailbox.c       requests to the servo; "raw", "resume", "debug"
  *   report.c        "status" and "stats"
@@ -45,6 +47,7 @@
 #include "mailbox.h"
 #include "params.h"
 #include "program.h"
+#include "recovery.h"
 #include "rproc.h"
 #include "servoamp/servo_proto.h"
 #include "servod.h"
@@ -71,6 +74,7 @@ struct servod_opts {
 	const char *telem_token_file;	/* --telemetry-token FILE, or NULL */
 	unsigned char telem_token[TELEM_TOKEN_MAX];	/* its contents */
 	uint32_t telem_token_len;
+	struct recovery_cfg recovery;	/* --recovery-limit, -window, -timeout, -backoff */
 };
 
 struct servod {
@@ -89,6 +93,7 @@ struct servod {
 	uint32_t pset[SP_P_COUNT];	/* the authoritative parameter set (params.h) */
 
 	struct session session;
+	struct recovery recovery;	/* restarts, the fault latch (main thread only) */
 	struct cycle_stats stats;
 	struct cycle_stats_pub pub;
 	struct cycle_irq irq;
@@ -107,8 +112,18 @@ static inline int servod_quitting(const struct servod *sd)
 
 /* The cycle thread (cycle.c). */
 void *cycle_thread(void *arg);
-/* One round of the supervisor (supervisor.c): main thread, every 20 ms. */
+/* One round of the supervisor (supervisor.c): main thread, every pass of
+ * the main loop (at least every 20 ms). */
 void supervise(struct servod *sd);
+/*
+ * One pass of the main loop (supervisor.c): the supervisor, the control
+ * socket (its poll waits up to 20 ms, or not at all while *busy), at most
+ * TELEMETRY_REQUESTS_PER_PASS telemetry requests (*busy: one was served).
+ * A client that keeps requests in flight never keeps the supervisor out.
+ */
+void servod_pass(struct servod *sd, int *busy);
+/* The recovery lines of `ampctl status` and `ampctl fault` (supervisor.c). */
+void supervisor_format(struct servod *sd, struct out *o);
 /* Telemetry (telemetry.c). */
 int telemetry_parse_opt(struct servod_opts *o);
 int telemetry_check_access(struct servod_opts *o);
@@ -116,7 +131,10 @@ void telemetry_start(struct servod *sd);
 void telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, const struct amp_rx_info *rx,
 		     const struct amp_cmd_axis *cmd, uint32_t n);
 void telemetry_attach(struct servod *sd, int recovery, uint64_t stall_cycle, uint64_t cycle);
-void telemetry_serve(struct servod *sd);	/* REQUEST frames: "param ..." (main thread) */
+/* REQUEST frames ("param ..."), at most TELEMETRY_REQUESTS_PER_PASS per
+ * call (main thread): 1 if it served one (more may wait), else 0. */
+#define TELEMETRY_REQUESTS_PER_PASS 1
+int telemetry_serve(struct servod *sd);
 void telemetry_stop(struct servod *sd);
 
 #endif

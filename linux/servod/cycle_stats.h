@@ -35,6 +35,9 @@ struct cycle_stats {
 	uint64_t stall_cycle;	/* cycles at which the last stall was detected */
 	uint64_t recoveries;	/* crashes reported to remoteproc (supervisor) */
 	uint64_t restores;	/* parameter sets loaded at an attach (supervisor) */
+	uint64_t recovery_retries;	/* restarts begun again after a failed one (supervisor) */
+	uint64_t recovery_failures;	/* restarts that did not bring the servo back (supervisor) */
+	uint64_t latches;	/* faults latched: one restart too many within the window */
 	uint64_t restore_errors;
 	uint32_t lat_min, lat_max;	/* wake-up latency, ns */
 	uint64_t lat_sum, lat_n;

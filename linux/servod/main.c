@@ -6,11 +6,15 @@
  *          [--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N]
  *          [--telemetry ADDR:PORT|off] [--telemetry-token FILE] [--id CONTROLLER_ID]
  *          [--inc-per-mm N] [--vmax MM_S] [--amax MM_S2] [--travel MM]
- *          [--idle sine|hold] [--max-program-s S] [-v]
+ *          [--idle sine|hold] [--max-program-s S]
+ *          [--recovery-limit K] [--recovery-window S] [--recovery-timeout S]
+ *          [--recovery-backoff S] [-v]
  *
  * Threads: the cycle thread (cycle.c, SCHED_FIFO) exchanges with the servo
  * at every cycle interrupt; the main thread runs the supervisor
- * (supervisor.c) and serves ampctl on the control socket (control.c); the
+ * (supervisor.c) and serves ampctl on the control socket (control.c) and
+ * the telemetry's requests, one per pass, between two rounds of the
+ * supervisor (telemetry.c); the
  * telemetry's drain thread, the firmware trace thread (fwtrace.c) and a
  * program's feeder thread (program_feed.c) run at normal priority. Every
  * function gets the one struct servod (context.h).
@@ -40,6 +44,7 @@ static void on_signal(int sig)
 static const struct servod_opts default_opts = {
 	SERVOD_SOCKET, SERVOD_PARAMS, 2000.0, 0.5, 133000000u, 80, 0, 100000000u, "127.0.0.1:7700",
 	"zynq7000_qemu", { 1000.0, 200.0, 2000.0, 500.0, 1000u, 0, PROG_MAX_S_DEFAULT }, "", TELEM_DEFAULT_PORT, NULL, { 0 }, 0,
+	RECOVERY_CFG_DEFAULT,
 };
 
 static void usage(void)
@@ -47,7 +52,51 @@ static void usage(void)
 	fprintf(stderr, "usage: servod [-s SOCKET] [-p PARAMFILE] [-a AMPLITUDE_INC] [-f FREQ_HZ] "
 			"[--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N] "
 			"[--telemetry ADDR:PORT|off] [--telemetry-token FILE] [--id NAME] [--inc-per-mm N] [--vmax MM_S] "
-			"[--amax MM_S2] [--travel MM] [--idle sine|hold] [--max-program-s S] [-v]\n");
+			"[--amax MM_S2] [--travel MM] [--idle sine|hold] [--max-program-s S] [--recovery-limit K] "
+			"[--recovery-window S] [--recovery-timeout S] [--recovery-backoff S] [-v]\n");
+}
+
+/* Seconds (decimals allowed) as ms into *ms, within (0, 86400]: 0, or 1. */
+static int parse_secs(const char *v, uint32_t *ms)
+{
+	char *end;
+	double s = strtod(v, &end);
+
+	if (!*v || *end || !(s > 0.0 && s <= 86400.0))
+		return 1;
+	*ms = (uint32_t)(s * 1000.0 + 0.5);
+	return *ms ? 0 : 1;
+}
+
+/* The bounds on recovery (recovery.h): 0, or 1 with the reason on stderr. */
+static int parse_recovery(struct recovery_cfg *c, const char *a, const char *v, int *known)
+{
+	char *end;
+
+	*known = 1;
+	if (!strcmp(a, "--recovery-limit")) {
+		unsigned long k = strtoul(v, &end, 10);
+
+		if (!*v || *end || k > RECOVERY_HISTORY_MAX) {
+			fprintf(stderr, "servod: --recovery-limit wants 0 (no fault latch) .. %u restarts\n",
+				RECOVERY_HISTORY_MAX);
+			return 1;
+		}
+		c->limit = (uint32_t)k;
+		return 0;
+	}
+	if (!strcmp(a, "--recovery-window") || !strcmp(a, "--recovery-timeout") || !strcmp(a, "--recovery-backoff")) {
+		uint32_t *ms = !strcmp(a, "--recovery-window") ? &c->window_ms :
+			       !strcmp(a, "--recovery-timeout") ? &c->timeout_ms : &c->backoff_ms;
+
+		if (parse_secs(v, ms)) {
+			fprintf(stderr, "servod: %s wants seconds > 0 (at most 86400), not '%s'\n", a, v);
+			return 1;
+		}
+		return 0;
+	}
+	*known = 0;
+	return 0;
 }
 
 /* 0, or 1 with the reason on stderr. */
@@ -55,6 +104,7 @@ static int parse_options(struct servod_opts *o, int argc, char **argv)
 {
 	for (int i = 1; i < argc; i++) {
 		const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : 0;
+		int known;
 
 		if (!strcmp(a, "-v")) {
 			o->verbose = 1;
@@ -62,6 +112,12 @@ static int parse_options(struct servod_opts *o, int argc, char **argv)
 		}
 		if (!v)
 			goto bad;
+		if (parse_recovery(&o->recovery, a, v, &known))
+			return 1;
+		if (known) {
+			i++;
+			continue;
+		}
 		if (!strcmp(a, "-s"))
 			o->sock_path = v;
 		else if (!strcmp(a, "-p"))
@@ -187,7 +243,7 @@ int main(int argc, char **argv)
 	struct servod *sd = servod_new();
 	pthread_mutexattr_t ma;
 	pthread_t th;
-	int rc;
+	int rc, busy = 0;
 
 	if (!sd)
 		return 1;
@@ -231,16 +287,20 @@ int main(int argc, char **argv)
 	logm(sd, "running: cycle thread SCHED_FIFO %d, socket %s, parameters %s, period %u us, %u axes",
 	     sd->opt.prio, sd->opt.sock_path, sd->opt.param_path, sd->pset[SP_P_cycle_period_us],
 	     sd->pset[SP_P_axes]);
+	logm(sd, "recovery: at most %u restart(s) within %g s, then the fault latch (0: none); a restarted "
+		 "firmware attaches within %g s; a failed restart is retried after %g s, doubled each time, "
+		 "at most %g s",
+	     sd->opt.recovery.limit, sd->opt.recovery.window_ms / 1000.0, sd->opt.recovery.timeout_ms / 1000.0,
+	     sd->opt.recovery.backoff_ms / 1000.0,
+	     (sd->opt.recovery.backoff_max_ms > sd->opt.recovery.backoff_ms ? sd->opt.recovery.backoff_max_ms :
+	      sd->opt.recovery.backoff_ms) / 1000.0);
 
-	while (!servod_quitting(sd)) {
-		supervise(sd);
-		control_serve(sd, 20);
-		telemetry_serve(sd);
-	}
+	while (!servod_quitting(sd))
+		servod_pass(sd, &busy);
 	logm(sd, "exiting: closing the link (the servo brings its axes to a safe stop)");
 	pthread_join(th, 0);	/* the cycle thread sees quit within 100 ms */
 	pthread_mutex_lock(&sd->lock);
-	if (session_open(&sd->session))
+	if (session_has_region(&sd->session))
 		amp_linux_close(&sd->amp);
 	pthread_mutex_unlock(&sd->lock);
 	control_close(sd);

@@ -48,7 +48,8 @@ static int req_status(struct servod *sd, struct out *o, int argc, char **argv, c
 	memcpy(act, sd->stats.act_pos, sizeof(act));
 	pthread_mutex_unlock(&sd->lock);
 	put(o, "remoteproc=%s\n", rproc_state(&sd->rproc));
-	put(o, "session=%s epoch=%u\n", open ? "open" : "closed", sd->session.epoch);
+	put(o, "session=%s epoch=%u\n", open ? "open" : session_latched(&sd->session) ? "fault" : "closed",
+	    sd->session.epoch);
 	put(o, "link=%s\n", peer == AMP_OK ? "attached" : amp_strerror(peer));
 	put(o, "servo_state=%s fault=0x%08x (%s) servo_epoch=%u attach_count=%u\n",
 	    sstate_name(pi.state), pi.fault, fault_name(pi.fault), pi.epoch, pi.attach_count);
@@ -57,7 +58,13 @@ static int req_status(struct servod *sd, struct out *o, int argc, char **argv, c
 	put(o, "params_restored_attach=%u restores=%llu recoveries=%llu recovering=%d params_resend=%d\n",
 	    sd->session.restored_attach, (unsigned long long)restores, (unsigned long long)recoveries,
 	    session_recovering(&sd->session), sd->session.params_resend);
+	supervisor_format(sd, o);
 	prog_format_status(&sd->prog, o, cmd, act);
+	if (session_latched(&sd->session)) {
+		snprintf(msg, n, "fault latched (%s): the firmware is stopped; `ampctl fault reset` restarts it",
+			 sd->recovery.latched_why);
+		return SE_OFFLINE;
+	}
 	if (peer != AMP_OK) {
 		snprintf(msg, n, "servo not running (remoteproc %s, link: %s)", rproc_state(&sd->rproc),
 			 amp_strerror(peer));
@@ -86,6 +93,9 @@ static void put_linux(struct out *o, const struct cycle_stats *c, const struct a
 	put(o, "linux.last_stall_cycles=%u\nlinux.last_stall_us=%u\n", c->stall_cycles, c->stall_us);
 	put(o, "linux.recoveries=%llu\n", (unsigned long long)c->recoveries);
 	put(o, "linux.restores=%llu\n", (unsigned long long)c->restores);
+	put(o, "linux.recovery_retries=%llu\nlinux.recovery_failures=%llu\nlinux.latches=%llu\n",
+	    (unsigned long long)c->recovery_retries, (unsigned long long)c->recovery_failures,
+	    (unsigned long long)c->latches);
 	put(o, "linux.fb_fresh=%u\nlinux.fb_stale=%u\nlinux.fb_torn=%u\nlinux.fb_missed=%u\nlinux.fb_invalid=%u\n",
 	    as->fresh, as->stale, as->torn, as->missed, as->invalid);
 	put(o, "linux.peer_late=%u\nlinux.mbox_ok=%u\nlinux.mbox_err=%u\nlinux.sem_corrupt=%u\n", as->peer_late,

@@ -42,6 +42,18 @@ int rproc_report_crash(const struct rproc *rp, char *path, size_t n)
 	return sysfs_write(path, "watchdog");
 }
 
+int rproc_write_state(const struct rproc *rp, const char *what, char *path, size_t n)
+{
+	snprintf(path, n, "%s/state", rp->dir);
+	return sysfs_write(path, what);
+}
+
+int rproc_write_recovery(const struct rproc *rp, const char *what, char *path, size_t n)
+{
+	snprintf(path, n, "%s/recovery", rp->dir);
+	return sysfs_write(path, what);
+}
+
 int rproc_trace_path(char *path, size_t n)
 {
 	char entry[256];

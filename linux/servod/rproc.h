@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * rproc.h - the servo core's remoteproc instance in sysfs (the one named
- * "servo-cpu1"): its state, the driver's report_crash attribute
+ * "servo-cpu1"): its state (read, and written: start, stop), its recovery
+ * setting, the driver's report_crash attribute
  * (docs/ABI/sysfs-servoamp-remoteproc) and the firmware's trace buffer in
  * debugfs.
  */
@@ -25,6 +26,12 @@ int rproc_find(struct rproc *rp);
 const char *rproc_state(struct rproc *rp);
 /* Writes "watchdog" to the driver's report_crash (its path in path): 0 or -1 (errno). */
 int rproc_report_crash(const struct rproc *rp, char *path, size_t n);
+/* Writes "start" or "stop" to state (the write returns once remoteproc has
+ * started or stopped the firmware, or failed to): 0 or -1 (errno). */
+int rproc_write_state(const struct rproc *rp, const char *what, char *path, size_t n);
+/* Writes "enabled" or "disabled" to recovery (what report_crash makes
+ * remoteproc do): 0 or -1 (errno). */
+int rproc_write_recovery(const struct rproc *rp, const char *what, char *path, size_t n);
 /* The firmware's trace buffer (debugfs trace0): 0, or -1 (no instance yet). */
 int rproc_trace_path(char *path, size_t n);
 

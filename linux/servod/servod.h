@@ -3,8 +3,8 @@
  * servod.h - what servod and ampctl share besides servoamp/servo_proto.h:
  * the local control socket. One request line per connection
  * ("status", "stats", "param list", "param get NAME", "param set NAME VALUE",
- * "resume", "debug hang|crash|fault|badparam|stack", "raw CMD NBYTES [WORD...]", "run FILE",
- * "stop"); the answer is
+ * "resume", "fault [reset]", "debug hang|crash|fault|badparam|stack", "raw CMD NBYTES [WORD...]",
+ * "run FILE", "stop"); the answer is
  * one status line, "OK" or "ERR <code> <message>", then the body, then EOF.
  */
 #ifndef SERVOD_H

@@ -18,8 +18,11 @@ enum session_state session_next(enum session_state s, enum session_event ev)
 	case SEV_CRASH_REPORTED:
 		return s == SESSION_OPEN || s == SESSION_RUNNING ? SESSION_RECOVERING : s;
 	case SEV_ATTACHED:
-	case SEV_RECOVERY_TIMEOUT:
 		return s == SESSION_RECOVERING ? SESSION_RUNNING : s;
+	case SEV_LATCHED:
+		return s == SESSION_OPEN || s == SESSION_RUNNING || s == SESSION_RECOVERING ? SESSION_FAULT : s;
+	case SEV_RESET:
+		return s == SESSION_FAULT ? SESSION_RECOVERING : s;
 	}
 	return s;
 }

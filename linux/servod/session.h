@@ -8,10 +8,15 @@
  *   OPEN        region initialised (a new epoch), the servo not yet seen
  *               running by remoteproc
  *   RUNNING     remoteproc has said "running" in this session
- *   RECOVERING  servod reported a stall to remoteproc; the firmware is
- *               being restarted and re-attaches in the same epoch
+ *   RECOVERING  servod reported a stall to remoteproc and restarts the
+ *               firmware (recovery.h), which re-attaches in the same epoch
+ *   FAULT       the fault latch: too many restarts within the window
+ *               (recovery.h); the firmware is stopped, nothing is
+ *               exchanged, until the operator's `ampctl fault reset`
  *
- * The cycle thread exchanges while the session is not CLOSED.
+ * The cycle thread exchanges while the session is open: neither CLOSED nor
+ * FAULT (FAULT keeps the region and its epoch for the restart after the
+ * reset).
  */
 #ifndef SERVOD_SESSION_H
 #define SERVOD_SESSION_H
@@ -25,6 +30,7 @@ enum session_state {
 	SESSION_OPEN,
 	SESSION_RUNNING,
 	SESSION_RECOVERING,
+	SESSION_FAULT,
 };
 
 enum session_event {
@@ -33,10 +39,9 @@ enum session_event {
 	SEV_SEEN_OFFLINE,	/* remoteproc says "offline" */
 	SEV_CRASH_REPORTED,	/* a stall reported through report_crash */
 	SEV_ATTACHED,		/* the servo attached and has the parameter set */
-	SEV_RECOVERY_TIMEOUT,	/* no attach within RECOVERY_TIMEOUT_S of the report */
+	SEV_LATCHED,		/* one restart too many within the window: the fault latch */
+	SEV_RESET,		/* the operator's `ampctl fault reset`: restart */
 };
-
-#define RECOVERY_TIMEOUT_S 20
 
 /* What the cycle thread saw (session.stall_pending): 0 nothing. */
 enum stall_why {
@@ -51,7 +56,6 @@ struct session {
 	int params_resend;		/* the servo may hold other values than servod's set (params_resend()) */
 	uint32_t resend_tries;		/* failed tries since params_resend was set */
 	uint64_t resend_ns;		/* the last try (mono_now_ns) */
-	struct timespec recover_t0;	/* when the crash was reported */
 	int waiting_logged;		/* CLOSED: "waiting until it is offline" said once */
 	atomic_int stall_pending;	/* the cycle thread saw a stall: report it (enum stall_why) */
 };
@@ -61,9 +65,21 @@ enum session_state session_next(enum session_state s, enum session_event ev);
 /* Applies ev: the caller holds sd->lock when it opens or closes the session. */
 void session_event(struct session *ss, enum session_event ev);
 
+/* The cycle thread exchanges, the mailbox posts. */
 static inline int session_open(const struct session *ss)
 {
+	return ss->state != SESSION_CLOSED && ss->state != SESSION_FAULT;
+}
+
+/* The region is servod's (initialised, not yet closed): open or FAULT. */
+static inline int session_has_region(const struct session *ss)
+{
 	return ss->state != SESSION_CLOSED;
+}
+
+static inline int session_latched(const struct session *ss)
+{
+	return ss->state == SESSION_FAULT;
 }
 
 static inline int session_recovering(const struct session *ss)

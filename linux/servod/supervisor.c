@@ -1,15 +1,20 @@
 // SPDX-License-Identifier: MIT
 /*
- * supervisor.c - the supervisor (main thread, every 20 ms): follows
- * remoteproc's view of the servo through the session state machine
+ * supervisor.c - the supervisor (main thread, every pass of the main loop):
+ * follows remoteproc's view of the servo through the session state machine
  * (session.h), initialises the region only while the servo is offline,
- * reports a stall the cycle thread saw to remoteproc (report_crash), and
- * loads the parameter set into the servo after every attach.
+ * reports a stall the cycle thread saw to remoteproc (report_crash) and
+ * restarts the firmware itself through remoteproc's state (stop, start),
+ * within the bounds of recovery.h: a failed restart is retried with
+ * backoff, one restart too many within the window latches a fault (the
+ * firmware left stopped) until the operator's "fault reset". It loads the
+ * parameter set into the servo after every attach.
  */
 #define _GNU_SOURCE
 #include <errno.h>
+#include <stdarg.h>
+#include <stdio.h>
 #include <string.h>
-#include <time.h>
 
 #include "context.h"
 
@@ -50,42 +55,291 @@ static void event_locked(struct servod *sd, enum session_event ev)
 	pthread_mutex_unlock(&sd->lock);
 }
 
+static int rs_is(const char *rs, const char *what)
+{
+	return !strcmp(rs, what);
+}
+
+/* remoteproc holds the firmware powered: a "stop" applies */
+static int rs_powered(const char *rs)
+{
+	return rs_is(rs, "running") || rs_is(rs, "crashed") || rs_is(rs, "attached");
+}
+
+/* ms as seconds for a log line: "60 s", "0.25 s" */
+static const char *secs(char *buf, size_t n, uint64_t ms)
+{
+	snprintf(buf, n, "%g s", (double)ms / 1000.0);
+	return buf;
+}
+
+/*
+ * remoteproc's own recovery off, once its instance is known: servod stops
+ * and starts the firmware itself. A recovery that fails in the kernel
+ * leaves remoteproc "offline" with the firmware's power reference still
+ * held: a "start" then does nothing and a "stop" is refused, so nothing
+ * could retry it. With recovery disabled a crash report leaves the state
+ * "crashed", which "stop" takes back to "offline".
+ */
+static void own_recovery(struct servod *sd, const char *rs)
+{
+	struct recovery *r = &sd->recovery;
+	char path[600];
+
+	if (rs_is(rs, "absent")) {
+		r->kernel_recovery_off = 0;	/* the instance may come back anew */
+		return;
+	}
+	if (r->kernel_recovery_off)
+		return;
+	r->kernel_recovery_off = 1;
+	if (rproc_write_recovery(&sd->rproc, "disabled", path, sizeof(path)))
+		logw(sd, "%s: %s: remoteproc's own recovery stays enabled (it restarts the firmware too)", path,
+		     strerror(errno));
+	else
+		logm(sd, "remoteproc's own recovery disabled (%s): servod restarts the firmware after a stall", path);
+}
+
+/* Latched: the firmware stopped (again, after a stop that failed). */
+static void latched_stop(struct servod *sd, const char *rs)
+{
+	struct recovery *r = &sd->recovery;
+	char path[600];
+
+	if (!rs_powered(rs)) {
+		r->stop_pending = 0;
+		return;
+	}
+	if ((int64_t)(mono_now_ns() - r->stop_retry_ns) < 0)
+		return;
+	if (rproc_write_state(&sd->rproc, "stop", path, sizeof(path))) {
+		r->stop_retry_ns = mono_now_ns() + recovery_backoff_ns(&sd->opt.recovery, 1);
+		logw(sd, "fault latched: stopping the firmware: %s: %s (tried again in %llu ms)", path, strerror(errno),
+		     (unsigned long long)(recovery_backoff_ns(&sd->opt.recovery, 1) / 1000000u));
+		return;
+	}
+	r->stop_pending = 0;
+	logm(sd, "fault latched: firmware stopped");
+}
+
+/* One restart too many within the window: the session FAULT, the
+ * firmware stopped, nothing exchanged until the operator's reset. */
+static void latch(struct servod *sd, const char *rs, const char *why)
+{
+	struct recovery *r = &sd->recovery;
+	const struct recovery_cfg *c = &sd->opt.recovery;
+	uint64_t now = mono_now_ns();
+	char w[32];
+
+	pthread_mutex_lock(&sd->lock);
+	session_event(&sd->session, SEV_LATCHED);
+	sd->stats.latches++;
+	pthread_mutex_unlock(&sd->lock);
+	r->phase = RESTART_NONE;
+	r->latched_ns = now;
+	snprintf(r->latched_why, sizeof(r->latched_why), "%s; %u restarts within %s (limit %u)", why,
+		 recovery_in_window(r, c, now), secs(w, sizeof(w), c->window_ms), c->limit);
+	logw(sd, "fault latched: %s: the firmware is stopped and the axes disabled until `ampctl fault reset`",
+	     r->latched_why);
+	r->stop_pending = 1;
+	r->stop_retry_ns = now;
+	r->foreign_logged = 0;
+	latched_stop(sd, rs);
+}
+
+/* Latched, every pass: the stop retried if it failed; a firmware someone
+ * else started is not servod's (nothing exchanged) until the reset. */
+static void latched_pass(struct servod *sd, const char *rs)
+{
+	struct recovery *r = &sd->recovery;
+
+	atomic_store(&sd->session.stall_pending, 0);
+	if (r->stop_pending) {
+		latched_stop(sd, rs);
+		return;
+	}
+	if (!rs_powered(rs)) {
+		r->foreign_logged = 0;
+		return;
+	}
+	if (!r->foreign_logged) {
+		logw(sd, "fault latched: remoteproc says %s (started by someone else?): servod does not exchange "
+			 "with the servo until `ampctl fault reset`", rs);
+		r->foreign_logged = 1;
+	}
+}
+
+/* A restart begins now (its stop next), or the fault latches: 1 or 0. */
+static int begin_restart(struct servod *sd, const char *rs, uint64_t now, const char *cause)
+{
+	struct recovery *r = &sd->recovery;
+
+	if (!recovery_may_restart(r, &sd->opt.recovery, now)) {
+		latch(sd, rs, cause);
+		return 0;
+	}
+	recovery_note_restart(r, now);
+	r->restart++;
+	r->phase = RESTART_STOP;
+	r->phase_ns = now;
+	return 1;
+}
+
+/* The restart did not bring the servo back: the next one after the
+ * backoff, or the latch when it would be one too many. */
+static void restart_failed(struct servod *sd, const char *rs, const char *fmt, ...) SERVOD_PRINTF(3, 4);
+static void restart_failed(struct servod *sd, const char *rs, const char *fmt, ...)
+{
+	struct recovery *r = &sd->recovery;
+	const struct recovery_cfg *c = &sd->opt.recovery;
+	uint64_t now = mono_now_ns(), wait, retry;
+	char cause[300], w[32], b[32];
+	va_list ap;
+
+	va_start(ap, fmt);
+	vsnprintf(r->last_failure, sizeof(r->last_failure), fmt, ap);
+	va_end(ap);
+	r->failed++;
+	pthread_mutex_lock(&sd->lock);
+	sd->stats.recovery_failures++;
+	pthread_mutex_unlock(&sd->lock);
+	wait = recovery_backoff_ns(c, r->failed);
+	retry = now + wait;
+	snprintf(cause, sizeof(cause), "restart %u failed (%s)", r->restart, r->last_failure);
+	if (!recovery_may_restart(r, c, retry)) {
+		logw(sd, "recovery: %s", cause);
+		latch(sd, rs, cause);
+		return;
+	}
+	r->phase = RESTART_BACKOFF;
+	r->retry_ns = retry;
+	logw(sd, "recovery: %s: retry in %s (%u of %u restarts within %s used)", cause,
+	     secs(b, sizeof(b), wait / 1000000u), recovery_in_window(r, c, now), c->limit,
+	     secs(w, sizeof(w), c->window_ms));
+}
+
 /* The cycle thread saw the servo's heartbeat stand still, or its state
- * word say FAULT (or nothing sane) for wd_limit cycles: remoteproc's
- * recovery stops and restarts the firmware, which re-attaches. */
-static void report_stall(struct servod *sd, int why)
+ * word say FAULT (or nothing sane) for wd_limit cycles: reported to
+ * remoteproc (its record of the crash), then servod restarts the
+ * firmware, which re-attaches; or, one restart too many, the latch. A
+ * restarted servo that stalls before its parameter set is loaded is a
+ * failed restart. */
+static void report_stall(struct servod *sd, int why, const char *rs)
 {
 	struct amp_peer_info pi = { 0 };
-	char path[600];
+	uint64_t now = mono_now_ns();
+	char path[600], cause[200];
 
 	if (why == STALL_PEER_ERROR) {
 		(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
 		if (pi.epoch != sd->amp.epoch)
-			logw(sd, "servo line corrupt (epoch word 0x%08x, this region's is %u) for %u cycles: reporting a crash to remoteproc",
-			     pi.epoch, sd->amp.epoch, sd->pset[SP_P_wd_limit]);
+			snprintf(cause, sizeof(cause),
+				 "servo line corrupt (epoch word 0x%08x, this region's is %u) for %u cycles", pi.epoch,
+				 sd->amp.epoch, sd->pset[SP_P_wd_limit]);
 		else
-			logw(sd, "servo faulted (state word 0x%08x, fault 0x%08x) for %u cycles: reporting a crash to remoteproc",
-			     pi.state, pi.fault, sd->pset[SP_P_wd_limit]);
+			snprintf(cause, sizeof(cause), "servo faulted (state word 0x%08x, fault 0x%08x) for %u cycles",
+				 pi.state, pi.fault, sd->pset[SP_P_wd_limit]);
 	} else {
-		logw(sd, "servo stalled (heartbeat still for %u cycles): reporting a crash to remoteproc",
-		     sd->pset[SP_P_wd_limit]);
+		snprintf(cause, sizeof(cause), "servo stalled (heartbeat still for %u cycles)",
+			 sd->pset[SP_P_wd_limit]);
 	}
-	if (rproc_report_crash(&sd->rproc, path, sizeof(path))) {
-		logm(sd, "%s: %s", path, strerror(errno));
+	if (session_recovering(&sd->session)) {
+		logw(sd, "%s: the restarted firmware stalled before its parameter set was loaded", cause);
+		restart_failed(sd, rs, "%s after its attach", cause);
 		return;
 	}
+	if (!recovery_may_restart(&sd->recovery, &sd->opt.recovery, now)) {
+		logw(sd, "%s: not restarted", cause);
+		latch(sd, rs, cause);
+		return;
+	}
+	logw(sd, "%s: reporting a crash to remoteproc", cause);
+	if (rproc_report_crash(&sd->rproc, path, sizeof(path)))
+		logm(sd, "%s: %s (servod restarts the firmware all the same)", path, strerror(errno));
 	pthread_mutex_lock(&sd->lock);
 	session_event(&sd->session, SEV_CRASH_REPORTED);
 	sd->stats.recoveries++;
 	cycle_stats_publish(&sd->stats, &sd->pub);
 	pthread_mutex_unlock(&sd->lock);
-	clock_gettime(CLOCK_MONOTONIC, &sd->session.recover_t0);
+	(void)begin_restart(sd, rs, now, cause);
+}
+
+/* RECOVERING: one step of the restart, at most one write to remoteproc's
+ * state per pass (a write returns once remoteproc has stopped or started
+ * the firmware, or failed to). */
+static void restart_step(struct servod *sd, const char *rs)
+{
+	struct recovery *r = &sd->recovery;
+	const struct recovery_cfg *c = &sd->opt.recovery;
+	uint64_t now = mono_now_ns(), timeout = (uint64_t)c->timeout_ms * 1000000u;
+	char path[600], t[32];
+
+	switch (r->phase) {
+	case RESTART_NONE:
+		return;
+	case RESTART_BACKOFF: {
+		char cause[300];
+
+		if ((int64_t)(now - r->retry_ns) < 0)
+			return;
+		snprintf(cause, sizeof(cause), "restart %u failed (%s)", r->restart, r->last_failure);
+		if (!begin_restart(sd, rs, now, cause))
+			return;
+		pthread_mutex_lock(&sd->lock);
+		sd->stats.recovery_retries++;
+		pthread_mutex_unlock(&sd->lock);
+		logm(sd, "recovery: restart %u (retry %u)", r->restart, r->failed);
+		return;
+	}
+	case RESTART_STOP:
+		if (rs_powered(rs)) {
+			if (rproc_write_state(&sd->rproc, "stop", path, sizeof(path))) {
+				restart_failed(sd, rs, "stop: %s: %s", path, strerror(errno));
+			} else {
+				r->phase = RESTART_START;
+				r->phase_ns = now;
+			}
+			return;
+		}
+		if (!rs_is(rs, "offline")) {
+			if (now - r->phase_ns > timeout)
+				restart_failed(sd, rs, "remoteproc %s, not stopped within %s", rs,
+					       secs(t, sizeof(t), c->timeout_ms));
+			return;
+		}
+		r->phase = RESTART_START;	/* offline already: the start in this pass */
+		r->phase_ns = now;
+		/* fall through */
+	case RESTART_START:
+		if (rs_is(rs, "offline")) {
+			if (rproc_write_state(&sd->rproc, "start", path, sizeof(path))) {
+				restart_failed(sd, rs, "start: %s: %s", path, strerror(errno));
+			} else {
+				r->phase = RESTART_ATTACH;
+				r->phase_ns = now;
+			}
+		} else if (rs_is(rs, "running")) {
+			r->phase = RESTART_ATTACH;
+			r->phase_ns = now;
+		} else if (now - r->phase_ns > timeout) {
+			restart_failed(sd, rs, "remoteproc %s after the stop", rs);
+		}
+		return;
+	case RESTART_ATTACH:
+		if (rs_is(rs, "crashed") || rs_is(rs, "offline"))
+			restart_failed(sd, rs, "remoteproc %s after the start", rs);
+		else if (now - r->phase_ns > timeout)
+			restart_failed(sd, rs, "started, but not attached within %s",
+				       secs(t, sizeof(t), c->timeout_ms));
+		return;
+	}
 }
 
 /* A new attach (first start, restart, recovery): the parameter set. */
 static void restore(struct servod *sd, uint32_t attach_count)
 {
 	struct session *ss = &sd->session;
+	struct recovery *r = &sd->recovery;
 	int recovery = session_recovering(ss);
 	uint64_t cycle, stall_cycle;
 	char msg[256];
@@ -107,8 +361,17 @@ static void restore(struct servod *sd, uint32_t attach_count)
 	session_event(ss, SEV_ATTACHED);
 	pthread_mutex_unlock(&sd->lock);
 	telemetry_attach(sd, recovery, stall_cycle, cycle);
-	if (recovery)
-		logm(sd, "recovery complete");
+	if (recovery) {
+		if (r->by_reset)
+			logm(sd, "recovery complete: the servo is back after the operator's fault reset");
+		else
+			logm(sd, "recovery complete (restart %u%s)", r->restart,
+			     r->restart > 1 ? ", after retries" : "");
+		r->phase = RESTART_NONE;
+		r->failed = 0;
+		r->restart = 0;
+		r->by_reset = 0;
+	}
 	logm(sd, "servo attached (epoch %u, attach_count %u): parameter set loaded", ss->epoch, attach_count);
 }
 
@@ -119,18 +382,14 @@ void supervise(struct servod *sd)
 	struct amp_peer_info pi;
 	int peer, why;
 
+	own_recovery(sd, rs);
+	if (session_latched(ss)) {
+		latched_pass(sd, rs);
+		return;
+	}
 	if (!session_open(ss)) {
 		open_session(sd, rs);
 		return;
-	}
-	if (session_recovering(ss)) {
-		struct timespec t;
-
-		clock_gettime(CLOCK_MONOTONIC, &t);
-		if (t.tv_sec - ss->recover_t0.tv_sec > RECOVERY_TIMEOUT_S) {
-			logm(sd, "recovery: servo not back after 20 s; giving up on it");
-			event_locked(sd, SEV_RECOVERY_TIMEOUT);
-		}
 	}
 	if (!strcmp(rs, "running"))
 		event_locked(sd, SEV_SEEN_RUNNING);
@@ -141,7 +400,13 @@ void supervise(struct servod *sd)
 	}
 	why = atomic_exchange(&ss->stall_pending, 0);
 	if (why)
-		report_stall(sd, why);
+		report_stall(sd, why, rs);
+	if (session_recovering(ss)) {
+		restart_step(sd, rs);
+		rs = rproc_state(&sd->rproc);	/* after a stop or a start */
+	}
+	if (!session_open(ss))	/* latched */
+		return;
 	pthread_mutex_lock(&sd->lock);
 	peer = amp_linux_peer(&sd->amp);
 	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
@@ -151,3 +416,80 @@ void supervise(struct servod *sd)
 	else if (peer == AMP_OK && ss->params_resend && !session_recovering(ss) && strcmp(rs, "running") == 0)
 		params_resend(sd);
 }
+
+void servod_pass(struct servod *sd, int *busy)
+{
+	supervise(sd);
+	control_serve(sd, *busy ? 0 : 20);
+	*busy = telemetry_serve(sd);
+}
+
+void supervisor_format(struct servod *sd, struct out *o)
+{
+	const struct recovery *r = &sd->recovery;
+	const struct recovery_cfg *c = &sd->opt.recovery;
+	uint64_t now = mono_now_ns();
+
+	put(o, "recovery=%s restart=%u restarts_in_window=%u restart_limit=%u window_s=%g failed_in_a_row=%u",
+	    recovery_phase_name(r->phase), r->restart, recovery_in_window(r, c, now), c->limit,
+	    (double)c->window_ms / 1000.0, r->failed);
+	if (r->phase == RESTART_BACKOFF)
+		put(o, " next_restart_in_ms=%llu",
+		    (unsigned long long)((int64_t)(r->retry_ns - now) > 0 ? (r->retry_ns - now) / 1000000u : 0u));
+	put(o, "\n");
+	if (r->last_failure[0])
+		put(o, "last_restart_failure=%s\n", r->last_failure);
+	if (session_latched(&sd->session))
+		put(o, "latched=1 latched_for_s=%.1f firmware_stopped=%d\nlatched_why=%s\n",
+		    (double)(now - r->latched_ns) / 1e9, !r->stop_pending, r->latched_why);
+	else
+		put(o, "latched=0\n");
+}
+
+/*
+ * "fault": the recovery lines of `ampctl status`. "fault reset": the
+ * operator's reset of a latched fault (a drive's fault reset, systemd's
+ * reset-failed): the restart history forgotten, the firmware started again
+ * (stopped first if someone started it meanwhile); the session RECOVERING
+ * until it attaches and has its parameter set ("recovery complete").
+ * Without a latched fault it only forgets the history of restarts.
+ */
+static int req_fault(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
+{
+	struct recovery *r = &sd->recovery;
+	char why[sizeof(r->latched_why)];
+	double ago;
+
+	if (argc == 1) {
+		supervisor_format(sd, o);
+		return SE_OK;
+	}
+	if (argc != 2 || strcmp(argv[1], "reset")) {
+		snprintf(msg, n, "usage: fault [reset]");
+		return SE_USAGE;
+	}
+	if (!session_latched(&sd->session)) {
+		if (r->phase == RESTART_NONE) {
+			recovery_clear(r);
+			put(o, "fault: none latched; the history of restarts is cleared\n");
+		} else {
+			put(o, "fault: none latched; a recovery is running (restart %u, %s)\n", r->restart,
+			    recovery_phase_name(r->phase));
+		}
+		return SE_OK;
+	}
+	snprintf(why, sizeof(why), "%s", r->latched_why);
+	ago = (double)(mono_now_ns() - r->latched_ns) / 1e9;
+	recovery_clear(r);
+	r->by_reset = 1;
+	r->restart = 1;
+	r->phase = RESTART_STOP;
+	r->phase_ns = mono_now_ns();
+	pthread_mutex_lock(&sd->lock);
+	session_event(&sd->session, SEV_RESET);
+	pthread_mutex_unlock(&sd->lock);
+	logm(sd, "fault reset by the operator (latched %.1f s ago: %s): restarting the servo", ago, why);
+	put(o, "fault reset: restarting the servo (recovering=1 in `ampctl status` until it is back)\n");
+	return SE_OK;
+}
+SERVOD_REQUEST("fault", req_fault);

@@ -28,7 +28,9 @@ int sysfs_read(const char *path, char *buf, size_t n)
 
 int sysfs_write(const char *path, const char *s)
 {
-	int fd = open(path, O_WRONLY);
+	/* O_TRUNC as the shell's ">": nothing to sysfs, the whole value to a
+	 * regular file (the tests' stand-in for remoteproc) */
+	int fd = open(path, O_WRONLY | O_TRUNC);
 	ssize_t r;
 
 	if (fd < 0)

@@ -193,21 +193,28 @@ extern const struct servod_request __stop_servod_requests[];
  * "Requests"): "param list | get NAME | set NAME VALUE", run by the same
  * handler as ampctl's (range checks, the servo's answer checked, the file,
  * the PARAM event); anything else is refused. Main thread, like the
- * control socket.
+ * control socket, and bounded like it: at most TELEMETRY_REQUESTS_PER_PASS
+ * per call (a parameter request may wait up to 200 ms for a hung servo),
+ * so that the supervisor runs between two of them however many clients
+ * keep in flight.
  */
-void telemetry_serve(struct servod *sd)
+int telemetry_serve(struct servod *sd)
 {
 	struct telem_request r;
+	int served = 0;
 
 	if (!sd->telem_on)
-		return;
-	while (telem_pop_request(&sd->telem, &r)) {
+		return 0;
+	while (served < TELEMETRY_REQUESTS_PER_PASS && telem_pop_request(&sd->telem, &r)) {
 		char msg[512] = "", *argv[8], *save = 0, *tok;
 		struct out o = { malloc(1024), 0, 1024 };
 		int argc = 0, rc = SE_USAGE;
 
-		if (!o.buf)
-			return;
+		served++;
+		if (!o.buf) {
+			telem_reply(&sd->telem, &r, SE_IO, "servod: out of memory", 21);
+			return served;
+		}
 		for (tok = strtok_r(r.text, " \t\r\n", &save); tok && argc < 8; tok = strtok_r(0, " \t\r\n", &save))
 			argv[argc++] = tok;
 		snprintf(msg, sizeof(msg), "only \"param list | get NAME | set NAME VALUE\" is served here");
@@ -221,6 +228,7 @@ void telemetry_serve(struct servod *sd)
 			telem_reply(&sd->telem, &r, rc, msg, strlen(msg));
 		free(o.buf);
 	}
+	return served;
 }
 
 void telemetry_stop(struct servod *sd)

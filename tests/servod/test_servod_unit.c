@@ -49,8 +49,9 @@ static void test_session(void)
 		{ SESSION_RECOVERING, SEV_SEEN_RUNNING, SESSION_RECOVERING },
 		{ SESSION_RECOVERING, SEV_CRASH_REPORTED, SESSION_RECOVERING },
 		{ SESSION_RECOVERING, SEV_ATTACHED, SESSION_RUNNING },
-		{ SESSION_RECOVERING, SEV_RECOVERY_TIMEOUT, SESSION_RUNNING },
-		{ SESSION_RUNNING, SEV_RECOVERY_TIMEOUT, SESSION_RUNNING },
+		{ SESSION_RECOVERING, SEV_LATCHED, SESSION_FAULT },
+		{ SESSION_FAULT, SEV_RESET, SESSION_RECOVERING },
+		{ SESSION_FAULT, SEV_SEEN_RUNNING, SESSION_FAULT },
 	};
 	struct session ss = { .state = SESSION_CLOSED };
 
@@ -208,7 +209,8 @@ static void test_path_error(void)
 
 static void test_requests(void)
 {
-	static const char *const names[] = { "status", "stats", "param", "raw", "run", "stop", "resume", "debug" };
+	static const char *const names[] = { "status", "stats", "param", "raw", "run", "stop", "resume", "debug",
+					     "fault" };
 	size_t n = (size_t)(__stop_servod_requests - __start_servod_requests);
 
 	CHECK_EQ(n, sizeof(names) / sizeof(names[0]));
