@@ -95,13 +95,15 @@ def host_load(n: int | None = None) -> list[multiprocessing.Process]:
 class Board:
     """One boot: servod and the firmware running, console helpers."""
 
-    def __init__(self, board: qemu.Board, images: qemu.Images, guest_load: bool, keep_logs: bool) -> None:
+    def __init__(self, board: qemu.Board, images: qemu.Images, guest_load: bool, keep_logs: bool,
+                 console_timeout: float = CONSOLE_TIMEOUT_S) -> None:
         self.m = qemu.QemuMachine(board, images, accel="tcg,thread=single", keep_logs=keep_logs)
         self.prompt = str(board.data["linux"]["prompt"])
         self.guest_load = guest_load
+        self.console_timeout = console_timeout
 
-    def sh(self, cmd: str, timeout: float = CONSOLE_TIMEOUT_S) -> tuple[int, str]:
-        return qemu.run_shell(self.m.uart(0), cmd, self.prompt, timeout=timeout)
+    def sh(self, cmd: str, timeout: float | None = None) -> tuple[int, str]:
+        return qemu.run_shell(self.m.uart(0), cmd, self.prompt, timeout=timeout or self.console_timeout)
 
     def count(self, text: str) -> int:
         _, out = self.sh(f'grep -c "{text}" {SERVOD_LOG}')
@@ -110,8 +112,10 @@ class Board:
 
     def start(self) -> None:
         self.m.start()
-        qemu.boot_to_shell(self.m, timeout=CONSOLE_TIMEOUT_S)
-        self.sh(f"(servod > {SERVOD_LOG} 2>&1 &)")
+        qemu.boot_to_shell(self.m, timeout=max(self.console_timeout, 60.0))
+        # --recovery-limit 0: rounds restart the firmware more than 3 times a
+        # minute on purpose, which would latch servod's fault (docs/cycle.md)
+        self.sh(f"(servod --recovery-limit 0 > {SERVOD_LOG} 2>&1 &)")
         self.sh(f"while ! grep -q 'waiting for the servo' {SERVOD_LOG}; do sleep 0.05; done")
         self.sh(f"echo rpu_app.elf > {RPROC}/firmware; echo start > {RPROC}/state")
         self.sh(f"while ! grep -q 'parameter set loaded' {SERVOD_LOG}; do sleep 0.05; done")
@@ -166,7 +170,7 @@ class Board:
 
 
 def run(rounds: int, seed: int, guest_load: bool, with_host_load: bool, keep_logs: bool = False,
-        max_boots: int = 20, mode: str = "hang") -> Result:
+        max_boots: int = 20, mode: str = "hang", console_timeout: float = CONSOLE_TIMEOUT_S) -> Result:
     board = qemu.Board.load("zynq7000_qemu")
     images = qemu.prepare_images(board)
     rng = random.Random(seed)
@@ -175,7 +179,7 @@ def run(rounds: int, seed: int, guest_load: bool, with_host_load: bool, keep_log
     t0 = time.monotonic()
     try:
         while res.rounds < rounds and res.boots < max_boots:
-            b = Board(board, images, guest_load, keep_logs)
+            b = Board(board, images, guest_load, keep_logs, console_timeout)
             res.boots += 1
             try:
                 b.start()
@@ -224,9 +228,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mode", choices=("hang", "stopstart"), default="hang",
                     help="hang: ampctl debug hang and remoteproc's recovery; stopstart: stop and start through sysfs")
     ap.add_argument("--keep-logs", action="store_true")
+    ap.add_argument("--console-timeout", type=float, default=CONSOLE_TIMEOUT_S,
+                    help="host seconds without an answer that count as a hang (default %(default)s)")
+    ap.add_argument("--max-boots", type=int, default=20, help="give up after this many boots (hangs restart the board)")
     ap.add_argument("--json", type=Path)
     a = ap.parse_args(argv)
-    res = run(a.rounds, a.seed, a.guest_load, a.host_load, a.keep_logs, mode=a.mode)
+    res = run(a.rounds, a.seed, a.guest_load, a.host_load, a.keep_logs, max_boots=a.max_boots, mode=a.mode,
+              console_timeout=a.console_timeout)
     d = asdict(res) | {"rate": res.rate}
     print(f"[stress] {res.mode}: {res.rounds} rounds in {res.boots} boot(s): {res.passed} back, {res.slow} slow, "
           f"{res.lost} lost, "

@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 @pytest.mark.board
 def test_every_fault_detected_and_recovered(images: qemu.Images) -> None:
     with netboard.ControllerBoard(images=images) as cb:
-        cb.start_servod()
+        cb.start_servod(faults.SERVOD_ARGS)
         cb.start_firmware()
         r = faults.run_campaign(board=cb)
     out = REPO / "build" / "faults.json"
