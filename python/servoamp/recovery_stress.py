@@ -150,11 +150,12 @@ class Board:
         # the exchange is back and the parameter restored
         _, out = self.sh("ampctl stats | grep '^linux.exchanges='; sleep 0.05; "
                          "ampctl stats | grep '^linux.exchanges='; ampctl param get pos_kp")
-        lines = out.strip().splitlines()
+        # by pattern, not by line: the kernel may print on the console meanwhile
+        ex = [int(x) for x in re.findall(r"^linux\.exchanges=(\d+)$", out, re.M)]
+        got_kp = re.findall(r"^pos_kp=([-+0-9.eE]+)", out, re.M)
         try:
-            e0, e1 = (int(x.split("=")[1]) for x in lines[:2])
-            back = e1 > e0 and float(lines[2].split("=", 1)[1].split()[0]) == kp
-        except (ValueError, IndexError):
+            back = len(ex) == 2 and ex[1] > ex[0] and len(got_kp) == 1 and float(got_kp[0]) == kp
+        except ValueError:
             back = False
         if not back:
             print(f"[stress] round {n}: recovered but not back: {out!r}", flush=True)
