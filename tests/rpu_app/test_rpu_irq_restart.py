@@ -22,10 +22,12 @@ No timed assertion: every wait is for a state the firmware reaches (a word,
 a console line), with a generous host-time limit only against hanging."""
 from __future__ import annotations
 
+import contextlib
 import re
 import socket
 import time
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 from conftest import CRSH, PRKD, RUN, qemu_ok
@@ -110,6 +112,18 @@ def arm_abort(g: GdbRemote, elf: Path, irq: int) -> None:
     g.write32(symbol(elf, "irq_debug_abort"), irq + 1)
 
 
+@contextlib.contextmanager
+def running_firmware(rpu_build: Path, elf: Path, cycles: int, tmp_path: Path) -> Iterator[tuple[QemuRpu, GdbRemote]]:
+    """The firmware running alone in QEMU, 20 cycles done, CPU1 stopped by
+    the gdb stub: (the run, its gdb connection)."""
+    with QemuRpu(tmp_path / "q", rpu_build / "qemu-stub.elf", elf) as q:
+        q.wait_uart(r"^running:", timeout=8)
+        wait_cycles(q, cycles, 20, 10, "first start")
+        g = q.attach_gdb()
+        g.interrupt()
+        yield q, g
+
+
 WHICH = ["cycle", "nested"]  # the nesting self-test runs once per 1000 cycles
 
 
@@ -123,11 +137,7 @@ def test_abort_after_ack_is_completed_by_the_fault_handler(rpu_build: Path, boar
     elf = rpu_build / "servo.elf"
     cycles = symbol(elf, "cycles")
     active = in_service(board_cfg, which)
-    with QemuRpu(tmp_path / "q", rpu_build / "qemu-stub.elf", elf) as q:
-        q.wait_uart(r"^running:", timeout=8)
-        wait_cycles(q, cycles, 20, 10, "first start")
-        g = q.attach_gdb()
-        g.interrupt()
+    with running_firmware(rpu_build, elf, cycles, tmp_path) as (q, g):
         arm_abort(g, elf, active[0][0])
         g.cont()
         q.wait_word(board_cfg["BOARD_STOP_STATUS_ADDR"], CRSH, timeout=10)
@@ -159,11 +169,7 @@ def test_interrupt_left_active_is_drained_at_start(rpu_build: Path, board_cfg: d
     elf = rpu_build / "servo.elf"
     cycles = symbol(elf, "cycles")
     active = in_service(board_cfg, which)
-    with QemuRpu(tmp_path / "q", rpu_build / "qemu-stub.elf", elf) as q:
-        q.wait_uart(r"^running:", timeout=8)
-        wait_cycles(q, cycles, 20, 10, "first start")
-        g = q.attach_gdb()
-        g.interrupt()
+    with running_firmware(rpu_build, elf, cycles, tmp_path) as (q, g):
         fr = symbol(elf, "fault_report")
         assert g.command(f"Z0,{fr:x},4") == "OK"
         arm_abort(g, elf, active[0][0])
