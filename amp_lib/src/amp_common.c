@@ -110,9 +110,18 @@ uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed)
 	return AMP_RX_MISSED;
 }
 
+static int words_equal(const uint32_t *a, const uint32_t *b, uint32_t words)
+{
+	for (uint32_t i = 0; i < words; i++)
+		if (a[i] != b[i])
+			return 0;
+	return 1;
+}
+
 int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
 		   uint32_t naxes_word, uint32_t pub, uint32_t last, uint32_t epoch,
-		   uint32_t *resync, struct amp_rx_info *rx, struct amp_stats *st)
+		   uint32_t *resync, const void *held, struct amp_rx_info *rx,
+		   struct amp_stats *st)
 {
 	const uint32_t *rec = (const uint32_t *)bufs + (pub & 1u) * words;
 	const uint32_t *t = tmp;
@@ -132,6 +141,14 @@ int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
 			rx->status = AMP_RX_TORN;
 		else if (t[1] != epoch || t[naxes_word] > AMP_MAX_AXES)
 			rx->status = AMP_RX_INVALID;
+		else if (held && words_equal(t, held, words))
+			/* word for word the record the reader holds, read again
+			 * while resynchronising (the attach seen a cycle after
+			 * its first record was taken, or attach_count hit by a
+			 * stray write): nothing new. (Without resynchronising
+			 * pub != last here, so the sequence words differ and
+			 * this stops at word 0.) */
+			rx->status = AMP_RX_STALE;
 		else
 			take = 1;
 		if (!take) {

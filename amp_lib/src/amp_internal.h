@@ -64,12 +64,15 @@ uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed);
  * With *resync set (the peer attached anew) the record pub names is
  * checked whatever pub is, last included, and taken as FRESH (missed 0)
  * if whole and valid (an unacceptable record at pub == last is STALE:
- * nothing new yet); *resync is cleared once a record is taken. Returns 1
- * if tmp holds a new record the caller must take, else 0.
+ * nothing new yet); *resync is cleared once a record is taken. A copy
+ * equal word for word to *held (the record the reader took last; NULL:
+ * no such check) is STALE, not taken. Returns 1 if tmp holds a new record
+ * the caller must take, else 0.
  */
 int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
 		   uint32_t naxes_word, uint32_t pub, uint32_t last, uint32_t epoch,
-		   uint32_t *resync, struct amp_rx_info *rx, struct amp_stats *st);
+		   uint32_t *resync, const void *held, struct amp_rx_info *rx,
+		   struct amp_stats *st);
 
 /* Wait until *word == value, at most timeout ticks. 0 or AMP_E_TIMEOUT. */
 int amp__wait_word(const uint32_t *word, uint32_t value, amp_ticks_t timeout);

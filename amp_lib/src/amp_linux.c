@@ -50,12 +50,15 @@ int amp_linux_init(struct amp_linux *l, void *base, uint32_t size, uint32_t wd_l
 	l->ocm = o;
 	l->epoch = h.epoch;
 	l->wd.limit = wd_limit;
+	l->hdr = h;
+	l->lstate = AMP_LSTATE_READY;
 	return AMP_OK;
 }
 
 void amp_linux_close(struct amp_linux *l)
 {
 	if (l && l->ocm) {
+		l->lstate = AMP_LSTATE_STOPPED;
 		WR_REL(&l->ocm->linux_line.state, AMP_LSTATE_STOPPED);
 		AMP_PORT_CACHE_CLEAN(&l->ocm->linux_line, 4u);
 	}
@@ -69,19 +72,21 @@ int amp_linux_peer(const struct amp_linux *l)
 	AMP_PORT_CACHE_INVAL(sl, sizeof(*sl));
 	epoch = RD_ACQ(&sl->epoch);
 	state = RD(&sl->state);
-	/* Another epoch word: before the servo's first attach in this
-	 * epoch, the servo of an earlier one (absent). After it, the servo
-	 * only ever rewrites the same epoch, so another value is a stray
-	 * write: a peer error, which the caller recovers, not an absence it
-	 * would wait on forever. */
+	/* Another epoch word: before any attach in this epoch (none seen,
+	 * attach_count still the 0 Linux wrote), the servo of an earlier one
+	 * (absent). After one, the servo only ever rewrites the same epoch,
+	 * so another value is a stray write: a peer error, which the caller
+	 * recovers, not an absence it would wait on forever (the stray write
+	 * may even come between the attach and Linux's first look at it). */
 	if (epoch != l->epoch)
-		return l->peer_seen ? AMP_E_PEER_ERROR : AMP_E_PEER_ABSENT;
+		return l->peer_seen || RD(&sl->attach_count) != 0 ? AMP_E_PEER_ERROR
+								  : AMP_E_PEER_ABSENT;
 	if (state == AMP_SSTATE_RUNNING || state == AMP_SSTATE_SAFESTOP)
 		return AMP_OK;
-	if (state == AMP_SSTATE_OFFLINE)
-		return AMP_E_PEER_ABSENT;
-	/* FAULT, or a word that is no state at all: the peer is attached
-	 * to this epoch but not sane */
+	/* FAULT, OFFLINE (the attach that wrote this epoch wrote RUNNING
+	 * before it, and nothing writes OFFLINE after: a stray write) or a
+	 * word that is no state at all: the peer is attached to this epoch
+	 * but not sane */
 	return AMP_E_PEER_ERROR;
 }
 
@@ -152,7 +157,7 @@ static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx)
 	AMP_PORT_CACHE_INVAL(&o->servo_line, sizeof(o->servo_line));
 	pub = RD_ACQ(&o->servo_line.fb_pub);
 	if (amp__rx_record(&f, o->fb, FB_WORDS, FB_END, FB_NAXES, pub, l->fb_seq,
-			   l->epoch, &l->fb_resync, rx, &l->st)) {
+			   l->epoch, &l->fb_resync, &l->fb, rx, &l->st)) {
 		l->fb = f;
 		l->fb_seq = pub;
 		l->fb_bad = 0;
@@ -222,6 +227,13 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		WR_REL(&o->cyc_sem.sem, AMP_SEM_BUSY);
 		AMP_PORT_CACHE_CLEAN(&o->cyc_sem, 4u);
 	}
+	/* Linux's own words, written again unchanged: the header as written
+	 * at init, then its state. A stray write to either would otherwise
+	 * keep the servo from attaching (AMP_E_PEER_ABSENT for ever, if it
+	 * came before the servo's first attach in this epoch); now it lasts
+	 * one cycle. The servo reads the same values before and after. */
+	amp__copy_out(&o->hdr, &l->hdr, sizeof(l->hdr));
+	WR(&o->linux_line.state, l->lstate);
 	WR(&o->linux_line.heartbeat, l->cycle);
 	WR(&o->linux_line.cycle, l->cycle);
 	WR_REL(&o->linux_line.cmd_pub, seq);

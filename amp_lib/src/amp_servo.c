@@ -7,6 +7,12 @@
  */
 #include "amp_internal.h"
 
+/* the later of two sequences (modulo 2^32: the one ahead of the other) */
+static uint32_t seq_newest(uint32_t a, uint32_t b)
+{
+	return (int32_t)(b - a) > 0 ? b : a;
+}
+
 int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size)
 {
 	struct amp_ocm *o = base;
@@ -46,8 +52,21 @@ int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size)
 	 * the new attach_count (the first record of this attach is taken
 	 * whatever its sequence), and the servo does the same with the
 	 * commands. So that Linux can only take a record of this attach, the
-	 * records of earlier ones are invalidated first (epoch word 0). */
+	 * records of earlier ones are invalidated first (epoch word 0).
+	 * The feedback sequence continues after the newest one found, in
+	 * fb_pub or in either record's sequence words: a sequence written
+	 * twice defeats the seqlock. The crashed attach may have written
+	 * fb_pub + 1 without publishing it, or fb_pub may have gone back (a
+	 * stray write) below records already published; a reader that read
+	 * the old seq_end of such a record (a stray fb_pub naming it, or a
+	 * read begun before the crash) would take the new payload half
+	 * written. */
 	s->fb_seq = RD(&sl->fb_pub);
+	AMP_PORT_CACHE_INVAL(o->fb, sizeof(o->fb));
+	for (uint32_t i = 0; i < 2u; i++) {
+		s->fb_seq = seq_newest(s->fb_seq, RD(&o->fb[i].seq_begin));
+		s->fb_seq = seq_newest(s->fb_seq, RD(&o->fb[i].seq_end));
+	}
 	s->heartbeat = RD(&sl->heartbeat);
 	s->cmd_seq = RD_ACQ(&o->linux_line.cmd_pub);
 	s->cmd_resync = 1;
@@ -121,7 +140,7 @@ int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_i
 
 	/* 3. switch the command buffer: read the newest commands */
 	if (amp__rx_record(&c, o->cmd, CMD_WORDS, CMD_END, CMD_NAXES, pub, s->cmd_seq,
-			   s->epoch, &s->cmd_resync, rx, &s->st)) {
+			   s->epoch, &s->cmd_resync, 0, rx, &s->st)) {
 		s->cmd = c;
 		s->cmd_seq = pub;
 	}
@@ -143,7 +162,9 @@ int amp_servo_cycle_tx(struct amp_servo *s, const struct amp_fb_axis *axes,
 		return AMP_E_INVAL;
 	/* 4. switch the response buffer: write and publish the feedback */
 	f.epoch = s->epoch;
-	f.cmd_seq = s->cmd_seq;
+	/* the last commands this servo took: none yet since its attach is 0,
+	 * not the cmd_pub it found there (commands it never took) */
+	f.cmd_seq = s->cmd_resync ? 0u : s->cmd_seq;
 	f.cycle = s->cycle;
 	f.t_cycle = t_cycle;
 	f.irq_latency = irq_latency;

@@ -13,10 +13,12 @@
  * servo was down, then a re-attach, left 999 cycles of AMP_RX_INVALID
  * with amp_linux_cycle returning AMP_OK: no feedback, and nothing for the
  * watchdog to act on. The rule checked here: whatever the shared words
- * say after a re-attach, feedback resumes within 2 cycles, or
- * amp_linux_cycle returns an error servod's watchdog acts on
- * (AMP_E_STALLED or AMP_E_FEEDBACK); and a run of refused feedback reads
- * is never AMP_OK for more than wd_limit cycles, re-attach or not.
+ * say after a re-attach, feedback resumes within 2 cycles (3 for a word of
+ * Linux's own header and line, which its next cycle writes again before
+ * the servo can attach), or amp_linux_cycle returns an error servod's
+ * watchdog acts on (AMP_E_STALLED or AMP_E_FEEDBACK); and a run of refused
+ * feedback reads is never AMP_OK for more than wd_limit cycles, re-attach
+ * or not.
  */
 #include <stddef.h>
 #include <stdint.h>
@@ -318,7 +320,10 @@ static struct outcome scenario(uint32_t w, int kind, uint32_t *value)
  * publication and sequence words, semaphores, records, lines and header,
  * and the mailbox frames), each set to each hostile value while the servo
  * is down. After the re-attach, feedback (and the servo's commands)
- * resume within 2 cycles and stay, or amp_linux_cycle returns
+ * resume within 2 cycles and stay (3 for the header and Linux's line:
+ * Linux writes them again in its next cycle, then the servo attaches; a
+ * stray write there kept the servo from attaching, AMP_E_STALLED, before
+ * amp_linux_cycle wrote them every cycle), or amp_linux_cycle returns
  * AMP_E_STALLED / AMP_E_FEEDBACK within wd_limit + 2 cycles and never
  * AMP_OK without feedback afterwards; and never more than wd_limit - 1
  * cycles in a row of AMP_OK (or AMP_E_PEER_ERROR, whose feedback servod
@@ -333,7 +338,8 @@ static void test_every_word_every_hostile_value(void)
 		for (int k = 0; k < V_KINDS; k++) {
 			uint32_t v;
 			struct outcome o = scenario(w, k, &v);
-			int ok_resumed = o.resumed >= 1 && o.resumed <= 2 && o.broken == 0 &&
+			unsigned bound = w < offsetof(struct amp_ocm, servo_line) / 4u ? 3u : 2u;
+			int ok_resumed = o.resumed >= 1 && o.resumed <= bound && o.broken == 0 &&
 					 o.cmd_resumed >= 1 && o.cmd_resumed <= 2;
 			int ok_error = !o.resumed && o.first_err >= 1 && o.first_err <= WD + 2u &&
 				       o.ok_in_error == 0;
@@ -364,19 +370,22 @@ static void test_every_word_every_hostile_value(void)
 			CHECK(ok);
 		}
 	}
-	printf("every word: %u scenarios, %u resumed within 2 cycles, %u reported an error,"
-	       " %u failed\nwords whose stray write ends in an error:%s\n", scen, resumed, errored,
-	       failed, errs);
+	printf("every word: %u scenarios, %u resumed within 2 (Linux's own words: 3) cycles,"
+	       " %u reported an error, %u failed\nwords whose stray write ends in an error:%s\n",
+	       scen, resumed, errored, failed, errs);
 	CHECK_EQ(scen, OCM_WORDS * V_KINDS);
-	CHECK(resumed > 0 && errored > 0);
+	CHECK(resumed > 0);
 }
 
 /*
- * Two stray writes at once: fb_pub := 0 as in the report and the servo's
+ * Stray writes at once: fb_pub := 0 as in the report and the servo's
  * attach_count wound back, so that the re-attach leaves it where Linux
- * last saw it. Linux cannot tell the attach, the records look reordered:
- * the refused reads are AMP_E_FEEDBACK at the wd_limit-th cycle (they
- * were AMP_OK for ever). What servod does then (a crash reported,
+ * last saw it. The re-attach continues after the newest sequence in the
+ * records, not after fb_pub: the feedback goes on in sequence, taken.
+ * With the records' sequence words hit too (:= 0), the re-attach starts
+ * again from 0 and Linux cannot tell the attach, the records look
+ * reordered: the refused reads are AMP_E_FEEDBACK at the wd_limit-th cycle
+ * (they were AMP_OK for ever). What servod does then (a crash reported,
  * remoteproc restarts the servo, which attaches again) brings the
  * feedback back within 2 cycles.
  */
@@ -385,11 +394,26 @@ static void test_unseen_reattach_reported(void)
 	unsigned n, err = 0;
 	struct step st;
 
+	/* fb_pub and attach_count: nothing to report, the feedback goes on */
 	start(WD);
 	CHECK_EQ(healthy(100), 0);
 	servo_down();
 	(void)cycle();
 	OCM->servo_line.fb_pub = 0;
+	OCM->servo_line.attach_count -= 1u;
+	servo_restart();
+	CHECK_EQ(OCM->servo_line.attach_count, L.servo_attach);
+	CHECK_EQ(cycle().rc, AMP_OK);	/* the restarted servo's first record */
+	CHECK_EQ(healthy(20), 0);
+
+	/* and the records' sequence words: the sequence starts again */
+	start(WD);
+	CHECK_EQ(healthy(100), 0);
+	servo_down();
+	(void)cycle();
+	OCM->servo_line.fb_pub = 0;
+	for (int i = 0; i < 2; i++)
+		OCM->fb[i].seq_begin = OCM->fb[i].seq_end = 0;
 	OCM->servo_line.attach_count -= 1u;
 	servo_restart();
 	CHECK_EQ(OCM->servo_line.attach_count, L.servo_attach);

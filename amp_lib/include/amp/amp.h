@@ -95,6 +95,8 @@ struct amp_linux {
 	uint32_t peer_seen;	/* the servo attached in this epoch: watchdog armed */
 	uint32_t fb_resync;	/* a new attach seen: take its first whole record */
 	uint32_t fb_bad;	/* cycles without a record taken since a refused read */
+	uint32_t lstate;	/* Linux's state word as last set (READY, STOPPED) */
+	struct amp_ocm_header hdr;	/* the header as written at init */
 	struct amp_watchdog wd;
 	struct amp_stats st;
 	struct amp_fb_record fb;	/* last whole feedback */
@@ -107,15 +109,19 @@ struct amp_linux {
  */
 int amp_linux_init(struct amp_linux *l, void *base, uint32_t size, uint32_t wd_limit);
 
-/* Mark the link closed (servo sees the Linux state change). */
+/* Mark the link closed (servo sees the Linux state change; a later
+ * amp_linux_cycle() writes STOPPED again, not READY). */
 void amp_linux_close(struct amp_linux *l);
 
 /*
  * AMP_OK if the servo is attached to this epoch and running (or in safe
- * stop), AMP_E_PEER_ABSENT if not attached (state OFFLINE, or another
- * epoch before its first attach in this one), AMP_E_PEER_ERROR if attached
- * but its state word says FAULT or is no AMP_SSTATE_* at all, or its epoch
- * word changed after it attached in this epoch (a stray write).
+ * stop), AMP_E_PEER_ABSENT if not attached (another epoch, and no attach
+ * in this one yet: attach_count 0 and none seen), AMP_E_PEER_ERROR if
+ * attached but its state word says FAULT, OFFLINE (an attach writes
+ * RUNNING before the epoch, and nothing writes OFFLINE after it) or is no
+ * AMP_SSTATE_* at all, or its epoch word changed after it attached in this
+ * epoch: words a stray write left, which the caller recovers (servod
+ * restarts the firmware), never an absence it would wait on forever.
  */
 int amp_linux_peer(const struct amp_linux *l);
 
@@ -149,9 +155,13 @@ int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit);
  * AMP_E_STALLED (heartbeat still for wd_limit cycles) takes precedence over
  * the rest. A new attach (the servo's attach_count changed) resynchronises
  * the feedback: its first whole record of this epoch is taken (FRESH)
- * whatever its sequence. AMP_E_FEEDBACK, next in precedence: a read was
- * refused (INVALID or TORN) and no record has been taken for wd_limit
- * cycles since, however the servo beats: the link is as good as stalled.
+ * whatever its sequence, unless it is word for word the record l->fb
+ * already holds (STALE: nothing new). AMP_E_FEEDBACK, next in precedence:
+ * a read was refused (INVALID or TORN) and no record has been taken for
+ * wd_limit cycles since, however the servo beats: the link is as good as
+ * stalled. Every cycle also writes Linux's own words again, unchanged (the
+ * header as written at init, Linux's state word): a stray write to them
+ * lasts one cycle instead of keeping the servo from attaching.
  */
 int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		    uint32_t n_axes, uint32_t flags, struct amp_rx_info *rx);
@@ -198,8 +208,8 @@ struct amp_servo {
 	uint32_t cycle;
 	uint32_t heartbeat;
 	uint32_t fb_seq;
-	uint32_t cmd_seq;	/* last command sequence consumed */
-	uint32_t cmd_resync;	/* attached: take the first whole commands */
+	uint32_t cmd_seq;	/* last command sequence consumed (cmd_pub at the attach) */
+	uint32_t cmd_resync;	/* attached, no commands taken since: take the first whole ones */
 	uint32_t mbox_state;	/* 0 idle, 1 request handed out */
 	uint32_t mbox_seq;
 	uint32_t mbox_cmd;
@@ -214,7 +224,9 @@ struct amp_servo {
  * Attach to the region Linux initialised: AMP_OK, AMP_E_PEER_ABSENT (no
  * valid region yet: retry later) or AMP_E_LAYOUT (built differently).
  * The feedback records of an earlier attach are invalidated (epoch word
- * 0), and the first whole commands of this epoch are taken whatever their
+ * 0), the feedback sequence continues after the newest one found in
+ * fb_pub and in both records (never a sequence an earlier attach wrote),
+ * and the first whole commands of this epoch are taken whatever their
  * sequence: nothing either side reads after an attach depends on what the
  * sequence words held before it.
  */
@@ -235,7 +247,9 @@ void amp_servo_set_state(struct amp_servo *s, uint32_t state, uint32_t fault);
  */
 int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_info *rx);
 
-/* Cycle steps 4-5: write the feedback, release the semaphore. */
+/* Cycle steps 4-5: write the feedback, release the semaphore. The record's
+ * cmd_seq is the last command sequence this servo took since its attach, 0
+ * before the first: never one it did not take. */
 int amp_servo_cycle_tx(struct amp_servo *s, const struct amp_fb_axis *axes,
 		       uint32_t n_axes, uint32_t t_cycle, uint32_t irq_latency);
 
