@@ -63,6 +63,7 @@ struct recovery {
 	uint64_t stop_retry_ns;
 	int foreign_logged;		/* latched and running: "not ours" said once */
 	int kernel_recovery_off;	/* remoteproc's own recovery disabled (supervisor.c) */
+	int crash_wait;			/* a crash was reported: the stop waits for "crashed" */
 };
 
 /* Restarts begun within the window that ends at at_ns. */

@@ -19,6 +19,9 @@
 #include "context.h"
 
 /* CLOSED: a new region (epoch) once remoteproc says the servo is offline. */
+
+/* How long a restart waits for remoteproc's crash handler after a report. */
+#define CRASH_WAIT_MS 1000u
 static void open_session(struct servod *sd, const char *rs)
 {
 	struct session *ss = &sd->session;
@@ -256,6 +259,8 @@ static void report_stall(struct servod *sd, int why, const char *rs)
 	logw(sd, "%s: reporting a crash to remoteproc", cause);
 	if (rproc_report_crash(&sd->rproc, path, sizeof(path)))
 		logm(sd, "%s: %s (servod restarts the firmware all the same)", path, strerror(errno));
+	else
+		sd->recovery.crash_wait = 1;
 	pthread_mutex_lock(&sd->lock);
 	session_event(&sd->session, SEV_CRASH_REPORTED);
 	sd->stats.recoveries++;
@@ -292,6 +297,17 @@ static void restart_step(struct servod *sd, const char *rs)
 		return;
 	}
 	case RESTART_STOP:
+		/*
+		 * After a crash report the stop waits (at most CRASH_WAIT_MS)
+		 * until remoteproc's crash handler, a work item, has said
+		 * "crashed": a stop before it makes the handler skip the crash,
+		 * and a handler run after the start would mark the new firmware
+		 * crashed (a failed restart, retried).
+		 */
+		if (r->crash_wait && rs_is(rs, "running") &&
+		    now - r->phase_ns < (uint64_t)CRASH_WAIT_MS * 1000000u)
+			return;
+		r->crash_wait = 0;
 		if (rs_powered(rs)) {
 			if (rproc_write_state(&sd->rproc, "stop", path, sizeof(path))) {
 				restart_failed(sd, rs, "stop: %s: %s", path, strerror(errno));
