@@ -18,10 +18,10 @@
 
 #include "context.h"
 
-/* CLOSED: a new region (epoch) once remoteproc says the servo is offline. */
-
 /* How long a restart waits for remoteproc's crash handler after a report. */
 #define CRASH_WAIT_MS 1000u
+
+/* CLOSED: a new region (epoch) once remoteproc says the servo is offline. */
 static void open_session(struct servod *sd, const char *rs)
 {
 	struct session *ss = &sd->session;
