@@ -25,6 +25,7 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 	struct amp_peer_info pi;
 	struct amp_rx_info rx;
 	uint64_t t_done;
+	uint32_t judged;
 	int rc, fresh;
 
 	src->fill(sd, cmd, n, sd->amp.cmd_seq + 1u);
@@ -32,6 +33,15 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 	memset(&rx, 0, sizeof(rx));
 	rc = amp_linux_cycle(&sd->amp, cmd, n, SP_CMDF_MOTION, &rx);
 	t_done = mono_now_ns();
+	/*
+	 * A stall (or a peer error) is the firmware's whose heartbeat this
+	 * cycle judged: the attach_count amp_linux_cycle read, not pi's, read
+	 * later. A restarted firmware attaching in between would otherwise
+	 * take the old one's stall for its own (a failed restart) and, its
+	 * attach_count then marked as reported, never have its own stall
+	 * reported.
+	 */
+	judged = sd->amp.servo_attach;
 	fresh = (rc == AMP_OK || rc == AMP_E_PEER_ERROR) &&
 		(rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED);
 	if (src->feedback)
@@ -53,12 +63,12 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 	} else if (rc == AMP_E_STALLED || rc == AMP_E_FEEDBACK) {
 		/* no heartbeat, or no feedback taken (every record refused)
 		 * for wd_limit cycles: both recovered as a stall */
-		if (cycle_stats_stall(st, pi.attach_count, w->t_ns))
+		if (cycle_stats_stall(st, judged, w->t_ns))
 			atomic_store(&sd->session.stall_pending, STALL_HEARTBEAT);
 	}
 	/* a servo whose state word says FAULT (or garbage) for wd_limit
 	 * cycles: recovered like a stall */
-	if (cycle_stats_peer_error(st, rc, sd->amp.wd.limit, pi.attach_count, w->t_ns))
+	if (cycle_stats_peer_error(st, rc, sd->amp.wd.limit, judged, w->t_ns))
 		atomic_store(&sd->session.stall_pending, STALL_PEER_ERROR);
 	else if (rc == AMP_OK || rc == AMP_E_PEER_ERROR) {
 		if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED)

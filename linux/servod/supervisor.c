@@ -427,7 +427,10 @@ void supervise(struct servod *sd)
 	peer = amp_linux_peer(&sd->amp);
 	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
 	pthread_mutex_unlock(&sd->lock);
-	if (peer == AMP_OK && pi.attach_count != ss->restored_attach && strcmp(rs, "running") == 0)
+	/* a restart takes the attach it waits for (ATTACH), not the one of a
+	 * firmware whose stall this pass made a failed restart (BACKOFF) */
+	if (peer == AMP_OK && pi.attach_count != ss->restored_attach && strcmp(rs, "running") == 0 &&
+	    (!session_recovering(ss) || sd->recovery.phase == RESTART_ATTACH))
 		restore(sd, pi.attach_count);
 	else if (peer == AMP_OK && ss->params_resend && !session_recovering(ss) && strcmp(rs, "running") == 0)
 		params_resend(sd);

@@ -23,7 +23,7 @@ def _servod_sources() -> list[Path]:
     return [SERVOD / n for n in names if n != "main.c"]
 
 
-def _build_and_run(tmp_path: Path, source: str, name: str) -> str:
+def _build_and_run(tmp_path: Path, source: str, name: str, link: tuple[str, ...] = ()) -> str:
     motion_build = TOP / "build" / "motion"
     subprocess.run(["make", "-s", "-C", str(TOP / "motion"), "host", f"BUILD={motion_build}"],
                    check=True)
@@ -38,7 +38,7 @@ def _build_and_run(tmp_path: Path, source: str, name: str) -> str:
            str(TOP / "amp_lib/src/amp_linux.c"), str(TOP / "amp_lib/src/amp_common.c"),
            str(TOP / "amp_lib/src/amp_servo.c"),
            str(TOP / "amp_lib/src/amp_strerror.c"), str(TOP / "linux/telemetry/telem.c"),
-           str(motion_build / "host" / "libmotion.a"), "-lm", "-o", str(exe)]
+           str(motion_build / "host" / "libmotion.a"), "-lm", *link, "-o", str(exe)]
     subprocess.run(cmd, check=True)
     proc = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300)
     out = proc.stdout + proc.stderr
@@ -59,5 +59,9 @@ def test_servod_recovery(tmp_path: Path) -> None:
     every attach ends in a latched fault after 3 restarts, reset by the
     operator; a failed restart is retried with backoff, and latched when it
     keeps failing; pipelined telemetry requests do not hold the stall's
-    report back."""
-    _build_and_run(tmp_path, "test_servod_recovery.c", "servod recovery")
+    report back; a restarted firmware that attaches inside the cycle that
+    judged the old one stalled is not blamed for that stall, and its own
+    stall is reported (the cycle's telemetry hook wrapped by the linker to
+    attach it there)."""
+    _build_and_run(tmp_path, "test_servod_recovery.c", "servod recovery",
+                   link=("-Wl,--wrap=telemetry_cycle",))

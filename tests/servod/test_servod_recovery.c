@@ -9,8 +9,10 @@
  *     cycle interrupt (a datagram socket standing in for the UIO device; in
  *     lock step, so that only a hung servo stalls), answering the mailbox;
  *     it can hang (heartbeat and mailbox stop, as `ampctl debug hang`),
- *     hang after each attach once its parameter set is loaded, or never
- *     start;
+ *     hang after each attach once its parameter set is loaded, never
+ *     start, or attach inside servod's cycle (between amp_linux_cycle()'s
+ *     watchdog and what servod does with its verdict: telemetry_cycle(),
+ *     wrapped by the linker, --wrap, attaches it there);
  *   - remoteproc in sysfs played by the test between two passes of the main
  *     loop: a directory with state, recovery and device/report_crash, the
  *     kernel's rules applied to what servod wrote (report_crash with
@@ -63,6 +65,9 @@ struct rig {
 	pthread_mutex_t fw;
 	struct amp_servo s;
 	int running, hang, hang_after_attach;
+	int attach_in_cycle;		/* a start leaves the attach to the next stalled cycle */
+	atomic_int attach_due;		/* started: the cycle attaches it */
+	atomic_uint attached_in_cycle;
 	uint32_t cycles, sets;		/* since its attach */
 	uint32_t val[SP_P_COUNT];
 	/* remoteproc (test thread) */
@@ -233,7 +238,27 @@ static void kernel_boot(void)
 		return;
 	}
 	snprintf(g.kstate, sizeof(g.kstate), "running");
-	fw_start();
+	if (g.attach_in_cycle)
+		atomic_store(&g.attach_due, 1);
+	else
+		fw_start();
+}
+
+/* servod's cycle thread, amp_linux_cycle() returned, what it said not yet
+ * acted on: a started firmware attaches here while the old one's verdict,
+ * a stall, is in flight (the window a restart's attach can always land in). */
+void __real_telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, const struct amp_rx_info *rx,
+			    const struct amp_cmd_axis *cmd, uint32_t n);
+void __wrap_telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, const struct amp_rx_info *rx,
+			    const struct amp_cmd_axis *cmd, uint32_t n);
+void __wrap_telemetry_cycle(struct servod *sd, const struct cycle_wake *w, int rc, const struct amp_rx_info *rx,
+			    const struct amp_cmd_axis *cmd, uint32_t n)
+{
+	__real_telemetry_cycle(sd, w, rc, rx, cmd, n);
+	if (rc == AMP_E_STALLED && atomic_exchange(&g.attach_due, 0)) {
+		fw_start();
+		atomic_fetch_add(&g.attached_in_cycle, 1);
+	}
 }
 
 /* What remoteproc makes of what servod wrote since the last pass. */
@@ -799,10 +824,48 @@ static void test_requests_do_not_starve(void)
 	rig_down();
 }
 
+/* ---- (4) the restart's attach inside the cycle that judged the old firmware ---- */
+
+static void test_attach_inside_a_stalled_cycle(void)
+{
+	uint64_t restores, failures;
+
+	printf("servod recovery: the restarted firmware attaches inside the cycle that judged the old one stalled\n");
+	rig_up(3, 50, 0);
+	restores = stat_of(&g.sd->stats.restores);
+	failures = stat_of(&g.sd->stats.recovery_failures);
+	pthread_mutex_lock(&g.fw);
+	g.attach_in_cycle = 1;
+	pthread_mutex_unlock(&g.fw);
+	fw_hang();
+	RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1 || latched(), 10);
+	printf("  %u attached in a stalled cycle, %u crash reports, %llu failed restarts\n",
+	       atomic_load(&g.attached_in_cycle), g.reports,
+	       (unsigned long long)(stat_of(&g.sd->stats.recovery_failures) - failures));
+	CHECK(atomic_load(&g.attached_in_cycle) >= 1);
+	/* the old firmware's stall is not the new one's: one report, the
+	 * restart good, the new attach given its parameter set */
+	CHECK_EQ(g.reports, 1);
+	CHECK_EQ(stat_of(&g.sd->stats.recovery_failures), failures);
+	CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
+	CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+	/* and the new firmware's own stall is reported and recovered */
+	pthread_mutex_lock(&g.fw);
+	g.attach_in_cycle = 0;
+	pthread_mutex_unlock(&g.fw);
+	fw_hang();
+	RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 2 || latched(), 10);
+	CHECK_EQ(g.reports, 2);
+	CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 2);
+	CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+	rig_down();
+}
+
 int main(void)
 {
 	setvbuf(stdout, 0, _IOLBF, 0);
 	test_bounds();
+	test_attach_inside_a_stalled_cycle();
 	test_fails_after_every_attach();
 	test_failed_restart_retried();
 	test_failing_restart_latches();

@@ -91,7 +91,7 @@ struct amp_linux {
 	uint32_t fb_seq;	/* last feedback sequence read */
 	uint32_t mbox_seq;
 	uint32_t mbox_pending;	/* a request is out, answer not read */
-	uint32_t servo_attach;	/* servo attach_count last seen */
+	uint32_t servo_attach;	/* servo attach_count last seen: the attach the last cycle judged */
 	uint32_t peer_seen;	/* the servo attached in this epoch: watchdog armed */
 	uint32_t fb_resync;	/* a new attach seen: take its first whole record */
 	uint32_t fb_bad;	/* cycles without a record taken since a refused read */
