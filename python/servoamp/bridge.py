@@ -15,12 +15,22 @@ telemetry connection (REQUEST frames, docs/telemetry.md "Requests"): servod
 applies a set with the same handler as ``ampctl param set``, and the change
 comes back as a PARAM event on /servoamp/param. A refused value comes back
 to the app as an error status; nothing changes. docs/recording.md "Live".
+
+Who may connect, and set parameters (:mod:`servoamp.wsfront`): the port is
+served by a front that refuses foreign web origins before the upgrade and
+gives the right to set parameters only to the URL with the bridge's token
+(``ws_url``); the SDK's servers sit behind it on TLS. The recording is
+flushed every ``flush_interval`` s of host time (SIGKILL loses at most that),
+and a write error (a full disk) ends it cleanly: RecordingError, the file
+readable up to the last flush.
 """
 
 from __future__ import annotations
 
 import itertools
 import json
+import os
+import secrets
 import socket
 import struct
 import threading
@@ -39,6 +49,7 @@ from foxglove.websocket import Capability, ServerListener, StatusLevel
 
 from servoamp import pbenc
 from servoamp import telemetry as tw
+from servoamp import wsfront
 from servoamp.record import RecordResult
 from servoamp.schemas import servoamp_pb2 as pb
 
@@ -74,6 +85,10 @@ def is_loopback(host: str) -> bool:
         return ipaddress.ip_address(host.strip("[]")).is_loopback
     except ValueError:
         return False
+
+
+class RecordingError(Exception):
+    """The MCAP file could not be written (a full disk): recording stopped."""
 
 
 class ParamError(Exception):
@@ -124,7 +139,9 @@ class Bridge:
                  mcap: str | Path | None = None, reconnect: bool = True,
                  connect_timeout: float = 10.0, max_backoff: float = 2.0,
                  request_timeout: float = 10.0, message_backlog: int = 1 << 16,
-                 params: bool = True,
+                 params: bool = True, ws_token: str | None = None,
+                 allow_origins: list[str] | tuple[str, ...] = wsfront.DEFAULT_ORIGINS,
+                 flush_interval: float = 1.0, keep_live: bool = False,
                  on_progress: Callable[[RecordResult], None] | None = None) -> None:
         self.host, self.port = host, port
         self.auth = tw.encode_auth(token)
@@ -159,19 +176,44 @@ class Bridge:
         self.meta_written = False
         self.params: dict[str, ParamInfo] = {}
         self.params_on = params
-        self.server = None  # a taken port raises before any file is opened
+        self.ws_token = ws_token or secrets.token_urlsafe(18)
+        self.ws_host = ws_host
+        self.flush_interval = flush_interval
+        self.keep_live = keep_live
+        self.record_error: str | None = None
+        self._dirty = False
+        self._last_flush = time.monotonic()
+        # the SDK's servers: read-write (the token's clients) and read-only,
+        # on 127.0.0.1 behind TLS; the front on the bridge's port
+        self.server = None
+        self.server_ro = None
+        self.front: wsfront.WsFront | None = None
         if serve:
             if not is_loopback(ws_host):
-                raise ValueError(f"{ws_host} is not a loopback address: the WebSocket server "
-                                 "has no access control, and whoever reaches it can set the "
-                                 "controller's parameters with this bridge's token (use an SSH "
-                                 "tunnel for another machine)")
-            self.server = foxglove.start_server(
-                name="servoamp", host=ws_host, port=ws_port, context=self.ctx,
-                capabilities=[Capability.Parameters] if params else [],
-                server_listener=_Listener(self) if params else None,
-                message_backlog_size=message_backlog)
+                raise ValueError(f"{ws_host} is not a loopback address: the live view is "
+                                 "served on this machine only (use an SSH tunnel for "
+                                 "another machine)")
+            crt, key, tls = wsfront.new_tls()
+            try:
+                self.server = foxglove.start_server(
+                    name="servoamp", host="127.0.0.1", port=0, context=self.ctx,
+                    capabilities=[Capability.Parameters] if params else [],
+                    server_listener=_Listener(self, writable=True) if params else None,
+                    message_backlog_size=message_backlog, tls_cert=crt, tls_key=key)
+                self.server_ro = foxglove.start_server(
+                    name="servoamp (read-only)", host="127.0.0.1", port=0, context=self.ctx,
+                    capabilities=[Capability.Parameters] if params else [],
+                    server_listener=_Listener(self, writable=False) if params else None,
+                    message_backlog_size=message_backlog, tls_cert=crt, tls_key=key)
+                # a taken port raises here, before any file is opened
+                self.front = wsfront.WsFront(ws_host, ws_port, upstream_rw=self.server.port,
+                                             upstream_ro=self.server_ro.port, tls=tls,
+                                             token=self.ws_token, origins=allow_origins)
+            except BaseException:
+                self._stop_servers()
+                raise
         self.mcap = None
+        self.mcap_path = str(mcap) if mcap is not None else None
         if mcap is not None:
             self.mcap = foxglove.open_mcap(
                 str(mcap), allow_overwrite=True, context=self.ctx,
@@ -180,8 +222,36 @@ class Bridge:
 
     # -- the app's side ----------------------------------------------------------------
     @property
+    def ws_port(self) -> int | None:
+        return self.front.port if self.front is not None else None
+
+    @property
     def ws_url(self) -> str | None:
-        return f"ws://127.0.0.1:{self.server.port}" if self.server is not None else None
+        """The URL to open in Foxglove: with the token, which gives the right
+        to set parameters (without it: read-only, from allowed origins)."""
+        if self.front is None:
+            return None
+        return f"{self.ws_url_plain}?token={self.ws_token}"
+
+    @property
+    def ws_url_plain(self) -> str | None:
+        """The URL without the token: a read-only view."""
+        if self.front is None:
+            return None
+        h = self.ws_host if ":" not in self.ws_host else f"[{self.ws_host.strip('[]')}]"
+        return f"ws://{h}:{self.front.port}/"
+
+    @property
+    def servers(self) -> list[Any]:
+        return [s for s in (self.server, self.server_ro) if s is not None]
+
+    def _stop_servers(self) -> None:
+        if self.front is not None:
+            self.front.close()
+            self.front = None
+        for s in self.servers:
+            s.stop()
+        self.server = self.server_ro = None
 
     def __enter__(self) -> Bridge:
         return self
@@ -191,19 +261,65 @@ class Bridge:
         self.close()
 
     def close(self) -> None:
+        """Ends the bridge; a write error while closing the recording sets
+        record_error (never raises)."""
         if self.sock is not None:
             self.sock.close()
             self.sock = None
-        if self.server is not None:
-            self.server.stop()
-            self.server = None
+        self._stop_servers()
         if self.mcap is not None:
-            self.mcap.write_metadata("servoamp.recording", {
-                "cycles": str(self.res.cycles), "connections": str(self.res.connections),
-                "gaps": str(len(self.res.gaps)), "stopped_by": self.res.stopped_by or "error",
-                "last_stats": json.dumps(self.res.last_stats)})
-            self.mcap.close()
-            self.mcap = None
+            m, self.mcap = self.mcap, None
+            try:
+                m.write_metadata("servoamp.recording", {
+                    "cycles": str(self.res.cycles), "connections": str(self.res.connections),
+                    "gaps": str(len(self.res.gaps)), "stopped_by": self.res.stopped_by or "error",
+                    "last_stats": json.dumps(self.res.last_stats)})
+                m.close()
+            except (RuntimeError, OSError) as e:
+                self.record_error = self._record_error_text(e)
+                try:
+                    m.close()
+                except (RuntimeError, OSError):
+                    pass
+
+    # -- the recording's bound on loss --------------------------------------------------
+    def _record_error_text(self, e: BaseException) -> str:
+        where = self.mcap_path or "?"
+        try:
+            st = os.statvfs(os.path.dirname(os.path.abspath(where)) or ".")
+            free = f"{st.f_bavail * st.f_frsize} bytes free on its filesystem"
+        except OSError:
+            free = "its filesystem unreadable"
+        last = f"up to cycle {self.last_cycle}" if self.last_cycle is not None else "before"
+        return (f"recording to {where} stopped: {e} ({free}); the file holds what was "
+                f"written {last}, readable without its summary")
+
+    def flush_recording(self, force: bool = False) -> None:
+        """Hands the open chunk to the OS when messages have waited for
+        flush_interval s (or force). A write error: RecordingError, or with
+        keep_live one message on stderr and the live view goes on."""
+        if self.mcap is None or not self._dirty:
+            return
+        now = time.monotonic()
+        if not force and now - self._last_flush < self.flush_interval:
+            return
+        self._last_flush = now
+        self._dirty = False
+        try:
+            self.mcap.flush()
+        except (RuntimeError, OSError) as e:
+            msg = self._record_error_text(e)
+            self.record_error = msg
+            m, self.mcap = self.mcap, None
+            try:
+                m.close()
+            except (RuntimeError, OSError):
+                pass
+            if not self.keep_live:
+                raise RecordingError(msg) from None
+            import sys
+
+            print(f"servoamp bridge: {msg}; the live view goes on", file=sys.stderr, flush=True)
 
     # -- parameters through servod ------------------------------------------------------
     def request(self, text: str) -> str:
@@ -273,6 +389,7 @@ class Bridge:
         if lost is not None:
             g.lost = lost
         self.ch[T_GAP].log(g.SerializeToString(), log_time=t_ns)
+        self._dirty = True
         self.res.gaps.append({"reason": reason, "source": source, "from_cycle": frm,
                               "to_cycle": to, "lost": lost, "detail": detail, "t_ns": t_ns})
 
@@ -360,8 +477,9 @@ class Bridge:
                 info = self.params.get(q.name)
                 if info is not None:
                     info.value = q.value if info.type == "f32" else int(q.value)
-                if self.server is not None and self.params_on:
-                    self.server.publish_parameter_values([fox_param(q.name, q.type, q.value)])
+                if self.params_on:
+                    for srv in self.servers:
+                        srv.publish_parameter_values([fox_param(q.name, q.type, q.value)])
             elif typ == tw.MSG_LOG:
                 lg = tw.decode_log(p)
                 self.ch_log.log(Log(timestamp=Timestamp(lg.t_ns // 1_000_000_000,
@@ -388,6 +506,8 @@ class Bridge:
         self.last_t_ns = t_ns
         self.res.cycles += cycles
         self.res.messages += nmsg
+        if nmsg:
+            self._dirty = True
         if self.last_cycle is not None:
             self.res.last_cycle = self.last_cycle
 
@@ -405,6 +525,7 @@ class Bridge:
         splitter = tw.FrameSplitter()
         try:
             while not stop.is_set():
+                self.flush_recording()
                 now = time.monotonic()
                 if deadline is not None and now >= deadline:
                     res.stopped_by = "duration"
@@ -429,7 +550,7 @@ class Bridge:
                             break
                         wait = backoff if deadline is None else min(backoff,
                                                                    max(0.0, deadline - now))
-                        stop.wait(wait)
+                        stop.wait(min(wait, self.flush_interval))
                         backoff = min(backoff * 2, self.max_backoff)
                         continue
                 try:
@@ -469,15 +590,23 @@ class Bridge:
                 ev.set()
 
 
-class _Listener(ServerListener):
-    """The WebSocket server's callbacks (called on the SDK's threads)."""
+READ_ONLY = ("servoamp: this connection is read-only: parameters are set through the URL "
+             "with the token that servoamp bridge printed")
 
-    def __init__(self, b: Bridge) -> None:
+
+class _Listener(ServerListener):
+    """A WebSocket server's callbacks (called on the SDK's threads): the
+    read-write server's sets reach servod, the read-only server's are
+    refused with an error status."""
+
+    def __init__(self, b: Bridge, writable: bool) -> None:
         self.b = b
+        self.writable = writable
 
     def _status(self, msg: str) -> None:
-        if self.b.server is not None:
-            self.b.server.publish_status(msg, StatusLevel.Error)
+        srv = self.b.server if self.writable else self.b.server_ro
+        if srv is not None:
+            srv.publish_status(msg, StatusLevel.Error)
 
     def on_get_parameters(self, client: Any, param_names: list[str],
                           request_id: str | None = None) -> list[Parameter]:
@@ -492,6 +621,10 @@ class _Listener(ServerListener):
     def on_set_parameters(self, client: Any, parameters: list[Parameter],
                           request_id: str | None = None) -> list[Parameter]:
         out: list[Parameter] = []
+        if not self.writable:
+            self._status(READ_ONLY)
+            return [fox_param(i.name, i.type, i.value) for p in parameters
+                    if (i := self.b.params.get(p.name)) is not None]
         if not self.b.params:
             try:
                 self.b.list_params()

@@ -2,6 +2,7 @@
 
     servoamp record --connect HOST:PORT -o FILE.mcap [--duration S] [--token-file F]
     servoamp bridge --connect HOST:PORT [--listen 127.0.0.1:8765] [--mcap FILE.mcap] [--token-file F]
+                    [--ws-token-file F] [--allow-origin ORIGIN] [--keep-live]
     servoamp plot FILE.mcap -o DIR [--queues CSV]
     servoamp info FILE.mcap [--json]
 """
@@ -14,6 +15,7 @@ import logging
 import signal
 import sys
 import threading
+from pathlib import Path
 from types import FrameType
 
 
@@ -89,7 +91,8 @@ def _token(args: argparse.Namespace, prog: str) -> tuple[bytes | None, int]:
 
 
 def _cmd_bridge(args: argparse.Namespace) -> int:
-    from servoamp.bridge import Bridge
+    from servoamp.bridge import Bridge, RecordingError
+    from servoamp.wsfront import DEFAULT_ORIGINS
 
     stop = threading.Event()
 
@@ -103,18 +106,33 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
         return rc
     host, port = args.connect
     ws_host, ws_port = args.listen
+    ws_token = None
+    if args.ws_token_file:
+        try:
+            ws_token = Path(args.ws_token_file).read_text().strip()
+        except OSError as e:
+            print(f"servoamp bridge: --ws-token-file: {e}", file=sys.stderr)
+            return 2
+        if len(ws_token) < 16 or not all(c.isalnum() or c in "-_" for c in ws_token):
+            print("servoamp bridge: --ws-token-file: the token must be at least 16 characters "
+                  "of A-Z a-z 0-9 - _", file=sys.stderr)
+            return 2
     try:
         b = Bridge(host, port, token=token, ws_host=ws_host, ws_port=ws_port,
                    serve=not args.no_server, mcap=args.mcap, reconnect=not args.no_reconnect,
-                   connect_timeout=args.connect_timeout, params=not args.no_params)
+                   connect_timeout=args.connect_timeout, params=not args.no_params,
+                   ws_token=ws_token, allow_origins=[*DEFAULT_ORIGINS, *args.allow_origin],
+                   flush_interval=args.flush_interval, keep_live=args.keep_live)
     except (OSError, RuntimeError, ValueError) as e:
         print(f"servoamp bridge: {e}", file=sys.stderr)
         return 4
-    url = f"ws://{ws_host}:{b.server.port}" if b.server is not None else None
+    url = b.ws_url
+    rc = 0
     try:
         if url:
             print(f"servoamp bridge: Foxglove WebSocket on {url} "
-                  f"(Foxglove: Open connection > Foxglove WebSocket)", flush=True)
+                  f"(Foxglove: Open connection > Foxglove WebSocket; the token gives the right "
+                  f"to set parameters, {b.ws_url_plain} is read-only)", flush=True)
         if args.mcap:
             print(f"servoamp bridge: recording to {args.mcap}", flush=True)
         try:
@@ -122,19 +140,28 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
         except ConnectionError as e:
             print(f"servoamp bridge: {e}", file=sys.stderr)
             return 3
+        except RecordingError as e:
+            print(f"servoamp bridge: {e}", file=sys.stderr)
+            res = b.res
+            res.stopped_by = "record_error"
+            rc = 5
         if stop.is_set():
             res.stopped_by = "signal"
     finally:
         b.close()
+    if b.record_error and rc == 0:
+        print(f"servoamp bridge: {b.record_error}", file=sys.stderr)
+        rc = 5
     d = res.as_dict()
     d["ws_url"] = url
+    d["record_error"] = b.record_error
     if args.json:
         print(json.dumps(d))
     else:
         print(f"bridged {res.cycles} cycles ({res.messages} messages, {len(res.gaps)} gaps, "
               f"{res.connections} connections) in {res.wall_s:.1f} s (CPU {res.cpu_s:.2f} s); "
               f"stopped by {res.stopped_by}")
-    return 0
+    return rc
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -173,8 +200,20 @@ def main(argv: list[str] | None = None) -> int:
                         "port 0: any free port)")
     p.add_argument("--no-server", action="store_true", help="MCAP only, no WebSocket server")
     p.add_argument("--no-params", action="store_true",
-                   help="do not offer the parameters capability (whoever reaches the "
-                        "WebSocket port could otherwise set parameters with this token)")
+                   help="do not offer the parameters capability at all")
+    p.add_argument("--ws-token-file", metavar="FILE",
+                   help="the token of the URL that may set parameters (default: a new random "
+                        "one, printed in the URL)")
+    p.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
+                   help="also let web pages of ORIGIN (scheme://host[:port], ':*' for any "
+                        "port) connect read-only; by default the Foxglove app and pages of "
+                        "localhost, 127.0.0.1 and [::1]")
+    p.add_argument("--flush-interval", type=float, default=1.0, metavar="S",
+                   help="hand the recording to the OS at least every S s (SIGKILL loses at "
+                        "most that; default 1)")
+    p.add_argument("--keep-live", action="store_true",
+                   help="when the recording cannot be written (a full disk), go on serving "
+                        "the live view instead of stopping (exit 5)")
     p.add_argument("--mcap", metavar="FILE.mcap", help="also write the channels to FILE")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")

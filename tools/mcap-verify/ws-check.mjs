@@ -4,7 +4,8 @@
 // decoded with protobufjs from the schema the server advertises.
 //
 //   node tools/mcap-verify/ws-check.mjs URL --seconds S [--param NAME --good V --bad V]
-//                                         [--timeout S]
+//                                         [--timeout S] [--origin O] [--subprotocol P]
+//                                         [--readonly]
 //
 // 1. subscribes to /servoamp/cycle and /servoamp/param and receives cycles
 //    until S seconds of controller time (log time) are covered: counts them,
@@ -13,6 +14,10 @@
 //    updates, sets NAME to the good value and waits for the change on
 //    /servoamp/param and in the parameter values; sets the bad value and
 //    waits for the error status, then lists again.
+// --readonly: the connection is expected to be read-only (no token in URL):
+//    the good value's set must come back as an error status with the value
+//    unchanged (and no change on /servoamp/param).
+// --origin: the Origin header a browser page of that origin would send.
 // Prints one JSON object with what it saw; exit status 0 when it got through
 // every step, 1 otherwise (the JSON says where it stopped).
 import { createRequire } from "node:module";
@@ -35,6 +40,8 @@ const pname = opt("--param", null);
 const SUBPROTOCOL = opt("--subprotocol", "foxglove.sdk.v1");
 const good = Number(opt("--good", "NaN"));
 const bad = Number(opt("--bad", "NaN"));
+const origin = opt("--origin", null);
+const readonly = argv.includes("--readonly");
 
 const out = {
   url,
@@ -70,7 +77,7 @@ function pbType(ch) {
 const client = new FoxgloveClient({
   // foxglove-sdk serves the protocol under the subprotocol name "foxglove.sdk.v1"
   // (the spec of "foxglove.websocket.v1", which this client implements, renamed)
-  ws: new WebSocket(url, [SUBPROTOCOL]),
+  ws: new WebSocket(url, [SUBPROTOCOL], origin ? { origin } : {}),
 });
 const subs = new Map(); // subscription id -> { topic, type }
 const waiters = []; // { pred, resolve }
@@ -150,6 +157,24 @@ function valueOf(pv, name) {
     const list = (await ev).pv;
     out.param_list = list.parameters.map((p) => ({ name: p.name, value: p.value, type: p.type }));
     client.subscribeParameterUpdates([pname]);
+
+    if (readonly) {
+      out.step = "set refused (read-only)";
+      const before = valueOf(list, pname);
+      const refusal = waitFor((e) => e.kind === "status" && e.s.level === 2);
+      ev = waitFor((e) => e.kind === "params" && e.pv.id === "set1");
+      client.setParameters([{ name: pname, value: good, type: "float64" }], "set1");
+      out.set_readonly = { before, status: (await refusal).s.message, reply: valueOf((await ev).pv, pname) };
+      out.step = "list after";
+      ev = waitFor((e) => e.kind === "params" && e.pv.id === "list2");
+      client.getParameters([pname], "list2");
+      out.list_after = valueOf((await ev).pv, pname);
+      out.step = "done";
+      out.ok = true;
+      client.close();
+      finish(0);
+      return;
+    }
 
     out.step = "set good";
     const change = waitFor((e) => e.kind === "param" && e.m.name === pname && Math.abs(e.m.value - good) < 1e-6);

@@ -1,0 +1,175 @@
+"""Who may connect to `servoamp bridge`'s live view, and who may set
+parameters (issue 21, items 1 and 5; python/servoamp/wsfront.py), against
+the real telem_feed with its stand-in parameter service on 127.0.0.1:
+
+* a web page of a foreign origin is refused before the upgrade (HTTP 403),
+  and a setParameters it would send changes nothing on the controller;
+* a wrong token is refused the same way;
+* a page of an allowed origin without the token sees the parameters,
+  read-only: its set comes back as an error status, the value unchanged;
+* the URL with the token sets (tests/recorder/test_bridge.py does that with
+  the reference client);
+* an older viewer offering only "foxglove.websocket.v1" is answered with that
+  name and gets the stream;
+* the SDK's own servers behind the front do not speak plain WebSocket: a
+  page that finds their ports cannot connect.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import socket
+import struct
+import subprocess
+import threading
+import time
+from pathlib import Path
+from typing import Any, Iterator
+
+import pytest
+
+from recorder_helpers import TOP, Feed
+from servoamp import bridge
+
+TOKEN = "access-test-token-0123"
+WS_CHECK = TOP / "tools" / "mcap-verify" / "ws-check.mjs"
+
+
+@pytest.fixture
+def live(feed_bin: Path, node_ready: None) -> Iterator[bridge.Bridge]:
+    """A bridge on a running feed (60 s at most), served in a thread."""
+    feed = Feed(feed_bin, "--cycles", "60000", "--axes", "2", "--params", "--token", TOKEN,
+                "--log-every", "500")
+    b = bridge.Bridge("127.0.0.1", feed.port, token=TOKEN, ws_port=0, reconnect=False)
+    stop = threading.Event()
+    t = threading.Thread(target=b.run, kwargs={"duration": 120, "stop": stop}, daemon=True)
+    t.start()
+    deadline = time.monotonic() + 60  # a hang turned into a failure, not a timing test
+    while b.hello is None and t.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert b.hello is not None, "the bridge did not connect to the feed"
+    try:
+        yield b
+    finally:
+        stop.set()
+        t.join(timeout=30)
+        b.close()
+        feed.kill()
+
+
+def _handshake(port: int, target: str, origin: str | None,
+               protocol: str = "foxglove.sdk.v1") -> tuple[int, str, socket.socket]:
+    """A browser's WebSocket upgrade request: (status, head, socket)."""
+    s = socket.create_connection(("127.0.0.1", port), timeout=10)
+    key = base64.b64encode(os.urandom(16)).decode()
+    lines = [f"GET {target} HTTP/1.1", f"Host: 127.0.0.1:{port}", "Upgrade: websocket",
+             "Connection: Upgrade", f"Sec-WebSocket-Key: {key}", "Sec-WebSocket-Version: 13",
+             f"Sec-WebSocket-Protocol: {protocol}"]
+    if origin is not None:
+        lines.append(f"Origin: {origin}")
+    s.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+    buf = b""
+    while b"\r\n\r\n" not in buf:
+        d = s.recv(4096)
+        if not d:
+            break
+        buf += d
+    head = buf.split(b"\r\n\r\n", 1)[0].decode("latin-1")
+    status = int(head.split(" ")[1]) if head.startswith("HTTP/") else 0
+    return status, buf.decode("latin-1", "replace"), s
+
+
+def _text_frame(payload: bytes) -> bytes:
+    """A client's (masked) text frame."""
+    mask = os.urandom(4)
+    n = len(payload)
+    hdr = bytes([0x81]) + (bytes([0x80 | n]) if n < 126 else bytes([0x80 | 126]) + struct.pack(">H", n))
+    return hdr + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+
+
+def _pos_kp(b: bridge.Bridge) -> str:
+    return b.request("param get pos_kp").strip()
+
+
+def _ws_check(url: str, *args: str) -> dict[str, Any]:
+    p = subprocess.run(["node", str(WS_CHECK), url, "--timeout", "60", *args],
+                       capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ, NODE_NO_WARNINGS="1"))
+    out = json.loads(p.stdout)
+    assert p.returncode == 0, (out, p.stderr)
+    return dict(out)
+
+
+@pytest.mark.parametrize("origin", ["https://evil.example", "http://localhost.evil.example:8080",
+                                    "null"])
+def test_foreign_origin_refused_before_upgrade(live: bridge.Bridge, origin: str) -> None:
+    port = live.ws_port
+    assert port is not None
+    before = _pos_kp(live)
+    status, head, s = _handshake(port, "/", origin)
+    try:
+        if status == 101:  # what the bridge did before the front: then the set goes through
+            s.sendall(_text_frame(json.dumps({"op": "setParameters", "id": "evil", "parameters": [
+                {"name": "pos_kp", "value": 99.0, "type": "float64"}]}).encode()))
+            s.settimeout(2)
+            try:
+                while s.recv(65536):
+                    pass
+            except OSError:
+                pass
+    finally:
+        s.close()
+    assert status == 403, head
+    assert f"origin {origin} is not allowed" in head, head
+    assert _pos_kp(live) == before
+
+
+def test_wrong_token_refused(live: bridge.Bridge) -> None:
+    port = live.ws_port
+    assert port is not None
+    for origin in (None, "http://127.0.0.1:3000"):
+        status, head, s = _handshake(port, "/?token=not-the-token-0000000", origin)
+        s.close()
+        assert status == 403 and "wrong token" in head, head
+    # the right one is let through, from any origin
+    status, head, s = _handshake(port, f"/?token={live.ws_token}", "https://evil.example")
+    s.close()
+    assert status == 101, head
+
+
+def test_allowed_origin_without_token_is_read_only(live: bridge.Bridge) -> None:
+    before = _pos_kp(live)
+    assert live.ws_url_plain is not None
+    out = _ws_check(live.ws_url_plain, "--seconds", "0.5", "--param", "pos_kp", "--good", "71",
+                    "--readonly", "--origin", "http://localhost:5173")
+    names = {p["name"] for p in out["param_list"]}
+    assert "pos_kp" in names  # the feed's stand-in service has just it
+    ro = out["set_readonly"]
+    assert "read-only" in ro["status"], ro
+    assert ro["reply"] == ro["before"] and out["list_after"] == ro["before"], out
+    assert not any(c["name"] == "pos_kp" for c in out["param_changes"]), out
+    assert _pos_kp(live) == before
+
+
+def test_older_viewer_subprotocol(live: bridge.Bridge) -> None:
+    """Studio <= 1.87 and Lichtblick before December 2025 offer only the old name."""
+    port = live.ws_port
+    assert port is not None
+    status, head, s = _handshake(port, "/", "http://localhost:8080", "foxglove.websocket.v1")
+    s.close()
+    assert status == 101, head
+    assert "sec-websocket-protocol: foxglove.websocket.v1" in head.lower(), head
+    # and the stream under it, by the reference client asking for the old name
+    assert live.ws_url is not None
+    out = _ws_check(live.ws_url, "--seconds", "0.5", "--subprotocol", "foxglove.websocket.v1")
+    assert out["cycles"]["count"] > 0 and out["cycles"]["out_of_order"] == 0, out
+
+
+def test_sdk_servers_behind_tls(live: bridge.Bridge) -> None:
+    """A page that scans 127.0.0.1 for the SDK's own ports gets no WebSocket."""
+    for srv in live.servers:
+        status, head, s = _handshake(srv.port, "/", "https://evil.example")
+        s.close()
+        assert status != 101, head
