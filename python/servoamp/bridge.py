@@ -57,6 +57,11 @@ MSG_REQUEST = 9   # client -> server: u32 id, text
 MSG_REPLY = 10    # server -> client: u32 id, i32 status, u32 n, text
 REPLY_HDR = struct.Struct("<IiI")
 REQUEST_MAX = 256
+# The recording is flushed (its chunk closed and written) at this much
+# telemetry too: well under the SDK's chunk size (1 MiB), so that the SDK
+# never writes a chunk by itself inside log(), where a write error (a full
+# disk) only prints a line per message instead of raising.
+FLUSH_BYTES = 1 << 18
 
 T_CYCLE = "/servoamp/cycle"
 T_PARAM = "/servoamp/param"
@@ -182,6 +187,7 @@ class Bridge:
         self.keep_live = keep_live
         self.record_error: str | None = None
         self._dirty = False
+        self._pending_bytes = 0
         self._last_flush = time.monotonic()
         # the SDK's servers: read-write (the token's clients) and read-only,
         # on 127.0.0.1 behind TLS; the front on the bridge's port
@@ -301,10 +307,12 @@ class Bridge:
         if self.mcap is None or not self._dirty:
             return
         now = time.monotonic()
-        if not force and now - self._last_flush < self.flush_interval:
+        if not force and now - self._last_flush < self.flush_interval and \
+                self._pending_bytes < FLUSH_BYTES:
             return
         self._last_flush = now
         self._dirty = False
+        self._pending_bytes = 0
         try:
             self.mcap.flush()
         except (RuntimeError, OSError) as e:
@@ -431,6 +439,7 @@ class Bridge:
         nmsg = 0
         t_ns = self.last_t_ns
         for typ, off, ln in frames:
+            self._pending_bytes += ln
             if typ == tw.MSG_CYCLE:
                 if enc is None or ln < csize:
                     raise tw.ProtocolError(f"CYCLE of {ln} bytes, expected {csize}")

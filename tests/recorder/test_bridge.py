@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import filecmp
 import json
+import re
 import os
 import shutil
 import socket
@@ -214,23 +215,79 @@ def test_non_request_frames_close_the_client(feed_bin: Path) -> None:
     assert res["protocol"] == 2
 
 
-def _resolves(msg: Any, path: str) -> bool:
-    """A Foxglove message path (fields, [i], map keys) against a protobuf descriptor."""
-    d = msg
-    for part in path.split("."):
-        name, _, idx = part.partition("[")
+_SEG = re.compile(r"""\.?(?P<name>@?[A-Za-z_][A-Za-z0-9_]*)
+                     (?P<idx>\[(?:-?\d+|:|-?\d*:-?\d*)\])?
+                     (?P<filt>\{(?P<ff>[A-Za-z_][A-Za-z0-9_]*)==(?P<fv>"[^"]*"|-?[\d.]+)\})?""",
+                  re.X)
+MODIFIERS = {"@derivative", "@abs", "@negative", "@sqrt", "@degrees", "@radians"}
+
+
+def resolve_path(msg: Any, path: str, whole: bool = False) -> str | None:
+    """A Foxglove message path below the topic (``.a[0].b``, ``[:]``,
+    ``{key=="x"}``, a final ``.@derivative``) against a protobuf descriptor,
+    the way the viewer reads the message: a map field is a list of
+    {key, value} entries, which takes an index or a filter. A plotted path
+    ends on a number; ``whole`` (a table, a raw view) may end on a list or a
+    message. None if it resolves, else why not."""
+    d, pos, leaf = msg, 0, False
+    path = "." + path if path and not path.startswith(".") else path
+    while pos < len(path):
+        m = _SEG.match(path, pos)
+        if m is None or m.end() == pos:
+            return f"cannot parse {path[pos:]!r}"
+        pos = m.end()
+        name = m.group("name")
+        if name.startswith("@"):
+            if name not in MODIFIERS or pos != len(path) or not leaf:
+                return f"{name}: a modifier, last and on a number"
+            return None
         if d is None:
-            return True  # below a map: any key
+            return f"{name}: below a scalar"
         f = d.fields_by_name.get(name)
         if f is None:
-            return False
-        if f.message_type is not None and f.message_type.GetOptions().map_entry:
-            d = None
-        else:
-            if bool(idx) != f.is_repeated:
-                return False
-            d = f.message_type
-    return True
+            return f"no field {name!r} in {d.full_name}"
+        repeated = f.is_repeated  # a map too: repeated entries
+        last = pos == len(path)
+        if repeated and not (m.group("idx") or m.group("filt")) and not (whole and last):
+            return f"{name} is a list (a map: a list of {{key, value}}): index or filter it"
+        if not repeated and (m.group("idx") or m.group("filt")):
+            return f"{name} is not a list"
+        if m.group("filt"):
+            et = f.message_type
+            if et is None or m.group("ff") not in et.fields_by_name:
+                return f"filter on {m.group('ff')!r}: not a field of {name}'s elements"
+        d = f.message_type
+        leaf = d is None
+    if not whole and not leaf:
+        return "a plotted path must end on a number"
+    return None
+
+
+def _queue_names() -> set[str]:
+    src = (TOP / "motion" / "src" / "pipeline.c").read_text()
+    arr = re.search(r"queue_names\[[^]]*\] = \{(.*?)\};", src, re.S)
+    assert arr, "queue_names not found in motion/src/pipeline.c"
+    return set(re.findall(r'"([a-z_]+)"', arr.group(1)))
+
+
+def test_path_resolver_refuses_what_the_viewer_cannot_plot() -> None:
+    """The check below is not vacuous: the paths the issue found plotting
+    nothing are refused, their working forms accepted."""
+    q = pb.DESCRIPTOR.message_types_by_name["QueueLevels"]
+    s = pb.DESCRIPTOR.message_types_by_name["Stats"]
+    c = pb.DESCRIPTOR.message_types_by_name["Cycle"]
+    assert resolve_path(q, "levels.blocks") is not None
+    assert resolve_path(q, "levels[:]{key==\"blocks\"}.value") is None
+    assert resolve_path(s, "counters.cycles") is not None
+    assert resolve_path(s, "counters") is not None
+    assert resolve_path(s, "counters", whole=True) is None
+    assert resolve_path(s, "last_cycle") is None
+    assert resolve_path(s, "counters[:]{key==\"cycles\"}.value") is None
+    assert resolve_path(c, "axes[0].feedback.actual_pos") is None
+    assert resolve_path(c, "axes.feedback.actual_pos") is not None
+    assert resolve_path(c, "axes[0].feedback.nonesuch") is not None
+    assert resolve_path(c, "cycle.@derivative") is None
+    assert resolve_path(c, "axes[0].@derivative") is not None
 
 
 def test_layout_matches_generator_and_the_bridge_channels(tmp_path: Path) -> None:
@@ -241,19 +298,29 @@ def test_layout_matches_generator_and_the_bridge_channels(tmp_path: Path) -> Non
     subprocess.run([sys.executable, str(TOP / "tools" / "foxglove" / "make_layout.py"), "-o",
                     str(gen)], check=True)
     assert json.loads(layout.read_text()) == json.loads(gen.read_text())
-    refs: list[str] = []
+    refs: list[tuple[str, bool]] = []  # (path, whole)
     for cfg in json.loads(layout.read_text())["configById"].values():
-        refs += [p["value"] for p in cfg.get("paths", [])]
+        refs += [(p["value"], False) for p in cfg.get("paths", [])]
         if "xAxisPath" in cfg:
-            refs.append(cfg["xAxisPath"]["value"])
-        refs += [cfg[k] for k in ("topicToRender", "topicPath") if k in cfg]
+            refs.append((cfg["xAxisPath"]["value"], False))
+        refs += [(cfg[k], True) for k in ("topicToRender", "topicPath") if k in cfg]
     assert refs
-    for r in refs:
-        topic, _, path = r.partition(".")
-        assert topic in bridge.TOPICS, r
+    queues = _queue_names()
+    bad = []
+    for r, whole in refs:
+        topic, dot, path = r.partition(".")
+        if topic not in bridge.TOPICS:
+            bad.append(f"{r}: no channel {topic}")
+            continue
         if path and topic in bridge.CHANNELS:
             desc = pb.DESCRIPTOR.message_types_by_name[bridge.CHANNELS[topic]]
-            assert _resolves(desc, path), r
+            why = resolve_path(desc, path, whole)
+            if why:
+                bad.append(f"{r}: {why}")
+        for key in re.findall(r'\{key=="([^"]*)"\}', r):
+            if topic == bridge.T_QUEUES and key not in queues:
+                bad.append(f"{r}: no queue {key!r} in the motion pipeline ({sorted(queues)})")
+    assert not bad, "\n".join(bad)
 
 
 def test_websocket_server_on_loopback_only(tmp_path: Path) -> None:

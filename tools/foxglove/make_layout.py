@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 
 HERE = Path(__file__).resolve().parent
+# the motion pipeline's queues plotted (motion/src/pipeline.c, queue_names)
+QUEUES = ("blocks", "segments", "setpoints")
 
 
 def _path(value: str, label: str) -> dict[str, Any]:
@@ -65,6 +67,8 @@ def layout(n_axes: int) -> dict[str, Any]:
                               [_path(f"{ax}[1].feedback.actual_pos", "actual")],
                               xAxisVal="custom",
                               xAxisPath={"value": f"{ax}[0].feedback.actual_pos", "enabled": True})
+    cfg["Plot!rate"] = _plot("cycle rate (cycles/s)", [
+        _path("/servoamp/cycle.cycle.@derivative", "cycles/s")])
     cfg["Plot!latency"] = _plot("latency (ns)", [
         _path("/servoamp/cycle.wake_latency_ns", "servod wake-up"),
         _path("/servoamp/cycle.irq_latency_ns", "servo irq"),
@@ -72,24 +76,23 @@ def layout(n_axes: int) -> dict[str, Any]:
     cfg["Plot!exchange"] = _plot("exchange status (0 fresh, 1 stale, 2 torn, 3 missed, "
                                  "4 invalid, 5 none) and queue levels", [
         _path("/servoamp/cycle.exchange", "exchange"),
-        _path("/servoamp/queues.levels.blocks", "blocks"),
-        _path("/servoamp/queues.levels.segments", "segments"),
-        _path("/servoamp/queues.levels.setpoints", "setpoints"),
+        # protobuf maps reach the viewer as lists of {key, value}
+        *[_path(f'/servoamp/queues.levels[:]{{key=="{q}"}}.value', q) for q in QUEUES],
     ])
     cfg["RosOut!log"] = {"searchTerms": [], "minLogLevel": 1, "topicToRender": "/servoamp/log"}
-    cfg["RawMessages!stats"] = {"topicPath": "/servoamp/stats", "diffEnabled": False,
-                                "diffMethod": "custom", "diffTopicPath": "",
-                                "showFullMessageForDiff": False, "expansion": "all"}
+    # servod's counters (a map: {key, value} rows) as a table
+    cfg["Table!stats"] = {"topicPath": "/servoamp/stats.counters"}
     cfg["RawMessages!gap"] = {"topicPath": "/servoamp/gap", "diffEnabled": False,
                               "diffMethod": "custom", "diffTopicPath": "",
                               "showFullMessageForDiff": False, "expansion": "all"}
     cfg["Parameters!params"] = {"title": "servod parameters (live connection)"}
     left = _stack(axis_ids)
     middle = _split(_split("Plot!xycmd", "Plot!xyact", "row"),
-                    _split("Plot!ferr", _split("Plot!latency", "Plot!exchange", "column"),
+                    _split("Plot!ferr", _split(_split("Plot!rate", "Plot!latency", "row"),
+                                               "Plot!exchange", "column"),
                            "column", 40), "column", 40)
     right = _split(_split("RosOut!log", "Parameters!params", "column", 50),
-                   _split("RawMessages!stats", "RawMessages!gap", "column", 60), "column", 60)
+                   _split("Table!stats", "RawMessages!gap", "column", 60), "column", 60)
     return {
         "configById": cfg,
         "globalVariables": {},
