@@ -17,11 +17,8 @@ the real telem_feed with its stand-in parameter service on 127.0.0.1:
 
 from __future__ import annotations
 
-import base64
 import json
 import os
-import socket
-import struct
 import subprocess
 import threading
 import time
@@ -31,7 +28,7 @@ from typing import Any, Iterator
 import pytest
 
 from recorder_helpers import TOP, Feed
-from servoamp import bridge
+from servoamp import bridge, wsprobe
 
 TOKEN = "access-test-token-0123"
 WS_CHECK = TOP / "tools" / "mcap-verify" / "ws-check.mjs"
@@ -59,36 +56,6 @@ def live(feed_bin: Path, node_ready: None) -> Iterator[bridge.Bridge]:
         feed.kill()
 
 
-def _handshake(port: int, target: str, origin: str | None,
-               protocol: str = "foxglove.sdk.v1") -> tuple[int, str, socket.socket]:
-    """A browser's WebSocket upgrade request: (status, head, socket)."""
-    s = socket.create_connection(("127.0.0.1", port), timeout=10)
-    key = base64.b64encode(os.urandom(16)).decode()
-    lines = [f"GET {target} HTTP/1.1", f"Host: 127.0.0.1:{port}", "Upgrade: websocket",
-             "Connection: Upgrade", f"Sec-WebSocket-Key: {key}", "Sec-WebSocket-Version: 13",
-             f"Sec-WebSocket-Protocol: {protocol}"]
-    if origin is not None:
-        lines.append(f"Origin: {origin}")
-    s.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
-    buf = b""
-    while b"\r\n\r\n" not in buf:
-        d = s.recv(4096)
-        if not d:
-            break
-        buf += d
-    head = buf.split(b"\r\n\r\n", 1)[0].decode("latin-1")
-    status = int(head.split(" ")[1]) if head.startswith("HTTP/") else 0
-    return status, buf.decode("latin-1", "replace"), s
-
-
-def _text_frame(payload: bytes) -> bytes:
-    """A client's (masked) text frame."""
-    mask = os.urandom(4)
-    n = len(payload)
-    hdr = bytes([0x81]) + (bytes([0x80 | n]) if n < 126 else bytes([0x80 | 126]) + struct.pack(">H", n))
-    return hdr + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
-
-
 def _pos_kp(b: bridge.Bridge) -> str:
     return b.request("param get pos_kp").strip()
 
@@ -108,10 +75,10 @@ def test_foreign_origin_refused_before_upgrade(live: bridge.Bridge, origin: str)
     port = live.ws_port
     assert port is not None
     before = _pos_kp(live)
-    status, head, s = _handshake(port, "/", origin)
+    status, head, s = wsprobe.upgrade(port, "/", origin)
     try:
         if status == 101:  # what the bridge did before the front: then the set goes through
-            s.sendall(_text_frame(json.dumps({"op": "setParameters", "id": "evil", "parameters": [
+            s.sendall(wsprobe.text_frame(json.dumps({"op": "setParameters", "id": "evil", "parameters": [
                 {"name": "pos_kp", "value": 99.0, "type": "float64"}]}).encode()))
             s.settimeout(2)
             try:
@@ -130,11 +97,11 @@ def test_wrong_token_refused(live: bridge.Bridge) -> None:
     port = live.ws_port
     assert port is not None
     for origin in (None, "http://127.0.0.1:3000"):
-        status, head, s = _handshake(port, "/?token=not-the-token-0000000", origin)
+        status, head, s = wsprobe.upgrade(port, "/?token=not-the-token-0000000", origin)
         s.close()
         assert status == 403 and "wrong token" in head, head
     # the right one is let through, from any origin
-    status, head, s = _handshake(port, f"/?token={live.ws_token}", "https://evil.example")
+    status, head, s = wsprobe.upgrade(port, f"/?token={live.ws_token}", "https://evil.example")
     s.close()
     assert status == 101, head
 
@@ -157,7 +124,7 @@ def test_older_viewer_subprotocol(live: bridge.Bridge) -> None:
     """Studio <= 1.87 and Lichtblick before December 2025 offer only the old name."""
     port = live.ws_port
     assert port is not None
-    status, head, s = _handshake(port, "/", "http://localhost:8080", "foxglove.websocket.v1")
+    status, head, s = wsprobe.upgrade(port, "/", "http://localhost:8080", "foxglove.websocket.v1")
     s.close()
     assert status == 101, head
     assert "sec-websocket-protocol: foxglove.websocket.v1" in head.lower(), head
@@ -170,6 +137,6 @@ def test_older_viewer_subprotocol(live: bridge.Bridge) -> None:
 def test_sdk_servers_behind_tls(live: bridge.Bridge) -> None:
     """A page that scans 127.0.0.1 for the SDK's own ports gets no WebSocket."""
     for srv in live.servers:
-        status, head, s = _handshake(srv.port, "/", "https://evil.example")
+        status, head, s = wsprobe.upgrade(srv.port, "/", "https://evil.example")
         s.close()
         assert status != 101, head

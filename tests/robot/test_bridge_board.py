@@ -9,7 +9,13 @@ time (its count equals servod's cycle counter over the same window: no
 hole); lists servod's parameters with their values; sets pos_kp (the set
 goes through servod's parameter path to the firmware and comes back on
 /servoamp/param, and `ampctl param get` agrees); sets an out-of-range value
-and gets servod's refusal as an error status, with nothing changed."""
+and gets servod's refusal as an error status, with nothing changed.
+
+Before that, who may set (issue 21, python/servoamp/wsfront.py): a web page
+of a foreign origin is refused before the upgrade and its setParameters
+never reaches the firmware; a viewer of an allowed origin without the
+bridge's token lists the parameters read-only, its set refused; `ampctl
+param get` on the board shows pos_kp unchanged after both."""
 
 from __future__ import annotations
 
@@ -22,7 +28,7 @@ from typing import Any
 
 import pytest
 
-from servoamp import bridge, info, netboard, qemu
+from servoamp import bridge, info, netboard, qemu, wsprobe
 from servoamp.record import RecordResult
 
 pytestmark = pytest.mark.board
@@ -53,7 +59,26 @@ def run(images: qemu.Images, tmp_path_factory: pytest.TempPathFactory) -> dict[s
                               daemon=True)
         th.start()
         try:
-            assert b.ws_url is not None
+            assert b.ws_url is not None and b.ws_port is not None and b.ws_url_plain
+            while b.hello is None and th.is_alive():  # the bridge on servod's telemetry
+                stop.wait(0.05)
+            status, head, sk = wsprobe.upgrade(b.ws_port, "/", "https://evil.example")
+            if status == 101:  # then the page's set would go through: sent, to be seen
+                sk.sendall(wsprobe.text_frame(json.dumps({
+                    "op": "setParameters", "id": "evil",
+                    "parameters": [{"name": "pos_kp", "value": 99.0, "type": "float64"}]}).encode()))
+                stop.wait(2)
+            sk.close()
+            out["evil"] = (status, head)
+            ro = subprocess.run(
+                ["node", str(WS_CHECK), b.ws_url_plain, "--seconds", "0.2", "--param", "pos_kp",
+                 "--good", "71", "--readonly", "--origin", "http://localhost:5173",
+                 "--timeout", "300"],
+                capture_output=True, text=True, timeout=400,
+                env=dict(os.environ, NODE_NO_WARNINGS="1"))
+            out["ro"] = json.loads(ro.stdout) if ro.stdout.strip() else {}
+            out["ro_rc"], out["ro_err"] = ro.returncode, ro.stderr
+            out["kp_untouched"] = cb.ampctl("param get pos_kp").strip().splitlines()[-1]
             node = subprocess.run(
                 ["node", str(WS_CHECK), b.ws_url, "--seconds", "3", "--param", "pos_kp",
                  "--good", "70", "--bad", "5000", "--timeout", "400"],
@@ -87,6 +112,17 @@ def test_every_cycle_in_order_through_the_reference_client(run: dict[str, Any]) 
     assert int(st["linux.cycles"]) > last
     assert int(st["telem.dropped"]) == 0 and int(st["telem.client_lost"]) == 0
     assert ws["axes"] == 4
+
+
+def test_only_the_token_may_set(run: dict[str, Any]) -> None:
+    status, head = run["evil"]
+    assert status == 403 and "origin https://evil.example is not allowed" in head, head
+    ro = run["ro"]
+    assert run["ro_rc"] == 0, (ro, run["ro_err"][-2000:])
+    assert "read-only" in ro["set_readonly"]["status"]
+    assert ro["set_readonly"]["reply"] == ro["set_readonly"]["before"] == ro["list_after"]
+    # on the board: the firmware's pos_kp as before both
+    assert run["kp_untouched"] == run["kp_before"]
 
 
 def test_parameters_from_the_app(run: dict[str, Any]) -> None:
