@@ -60,6 +60,8 @@ HEAD_TIMEOUT_S = 5.0
 # a viewer that reads nothing for this long is dropped (its relay would
 # otherwise hold a thread and the SDK's backlog for it forever)
 STALL_TIMEOUT_S = 30.0
+# connections at once (handshakes and relays): more are answered 503 at once
+MAX_CONNS = 64
 
 # ":*" at the end: any port (or none)
 DEFAULT_ORIGINS = ("https://app.foxglove.dev", "http://localhost:*", "http://127.0.0.1:*",
@@ -240,6 +242,16 @@ class WsFront:
                 continue
             except OSError:
                 return
+            with self.lock:
+                full = len(self.conns) >= MAX_CONNS
+                if not full:
+                    self.conns.add(c)
+            if full:
+                c.settimeout(1.0)
+                _answer(c, 503, "Service Unavailable",
+                        f"servoamp bridge: {MAX_CONNS} connections already")
+                c.close()
+                continue
             threading.Thread(target=self._serve, args=(c,), name="ws-front-conn",
                              daemon=True).start()
 
@@ -263,8 +275,6 @@ class WsFront:
                           f"--allow-origin {origin}")
 
     def _serve(self, c: socket.socket) -> None:
-        with self.lock:
-            self.conns.add(c)
         up: ssl.SSLSocket | None = None
         try:
             c.settimeout(HEAD_TIMEOUT_S)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import threading
 import time
@@ -140,3 +141,19 @@ def test_sdk_servers_behind_tls(live: bridge.Bridge) -> None:
         status, head, s = wsprobe.upgrade(srv.port, "/", "https://evil.example")
         s.close()
         assert status != 101, head
+
+
+def test_bad_requests_answered_400(live: bridge.Bridge) -> None:
+    """A head over 16 KiB, or a request that is no WebSocket upgrade: 400,
+    and the front goes on serving."""
+    port = live.ws_port
+    assert port is not None
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(b"GET / HTTP/1.1\r\nX-Pad: " + b"a" * 20000 + b"\r\n\r\n")
+        assert s.recv(4096).startswith(b"HTTP/1.1 400"), "oversize head"
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
+        assert s.recv(4096).startswith(b"HTTP/1.1 400"), "no upgrade"
+    status, head, sk = wsprobe.upgrade(port, f"/?token={live.ws_token}", None)
+    sk.close()
+    assert status == 101, head
