@@ -11,11 +11,13 @@
  *              [--restart-at CYCLE] [--param-every N] [--log-every N]
  *              [--queues-every N] [--burst] [--linger-ms MS] [--id NAME]
  *              [--client-buffer BYTES] [--stats-ms MS] [--start-cycle C]
- *              [--token STR] [--auth-ms MS] [--stall-ms MS] [--params]
+ *              [--token STR] [--auth-ms MS] [--stall-ms MS] [--params] [--hold]
  *
  * --params answers REQUEST frames like servod's parameter service, for one
  * parameter (pos_kp, f32 in [0, 1000] 1/s): "param list", "param get
- * pos_kp", "param set pos_kp V" (a set is published as a PARAM event).
+ * pos_kp", "param set pos_kp V" (a set is published as a PARAM event), also
+ * while --wait-clients holds the cycles back. --hold: after the last cycle
+ * the server stays up (statistics, requests) until SIGINT/SIGTERM.
  * Prints "listening 127.0.0.1 PORT" (flushed) when ready, and at the end one
  * JSON line: {"pushed":..,"dropped":..,"drained":..,"client_lost":..,...}.
  * --burst pushes as fast as it can (drops when the drain thread falls behind).
@@ -55,7 +57,7 @@ struct opts {
 	int burst;
 	const char *token;
 	unsigned auth_ms, stall_ms;
-	int params;
+	int params, hold;
 };
 
 /* --params: servod's "param" requests (params.c) for one parameter. */
@@ -130,14 +132,14 @@ static int usage(void)
 			"[--ring CAP] [--wait-clients K] [--wait-timeout S] [--restart-at C] "
 			"[--param-every N] [--log-every N] [--queues-every N] [--burst] "
 			"[--linger-ms MS] [--id NAME] [--client-buffer B] [--stats-ms MS] [--start-cycle C] "
-			"[--token STR] [--auth-ms MS] [--stall-ms MS] [--params]\n");
+			"[--token STR] [--auth-ms MS] [--stall-ms MS] [--params] [--hold]\n");
 	return 2;
 }
 
 int main(int argc, char **argv)
 {
 	struct opts o = { "127.0.0.1", "telem_feed", 0, 4, 4096, 0, 1u << 20, 500, 2000,
-			  1000.0, 10.0, 1000, 0, 0, 0, 0, 0, 0, NULL, 0, 0, 0 };
+			  1000.0, 10.0, 1000, 0, 0, 0, 0, 0, 0, NULL, 0, 0, 0, 0 };
 	struct app app = { 0, 0, 0, 0 };
 	struct telem_cfg cfg;
 	static struct telem t;
@@ -176,6 +178,7 @@ int main(int argc, char **argv)
 		if (!strcmp(a, "--token") && v) { o.token = v; i++; continue; }
 		if (!strcmp(a, "--burst")) { o.burst = 1; continue; }
 		if (!strcmp(a, "--params")) { o.params = 1; continue; }
+		if (!strcmp(a, "--hold")) { o.hold = 1; continue; }
 		return usage();
 	}
 	if (o.axes < 1 || o.axes > AMP_MAX_AXES || o.rate <= 0.0 || o.port > 65535)
@@ -231,6 +234,8 @@ int main(int argc, char **argv)
 				telem_destroy(&t);
 				return 3;
 			}
+			if (o.params)	/* servod answers requests with no cycle running too */
+				serve_params(&t);
 			usleep(2000);
 		}
 		usleep(20000);	/* let the drain thread send the HELLO first */
@@ -340,6 +345,11 @@ int main(int argc, char **argv)
 
 			telem_push_queues(&t, t_now, q, 3);
 		}
+	}
+	while (o.hold && !stop_flag) {	/* the cycles stopped, the server did not */
+		if (o.params)
+			serve_params(&t);
+		usleep(2000);
 	}
 	telem_stop(&t);
 	telem_get_stats(&t, &st);
