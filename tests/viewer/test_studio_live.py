@@ -1,0 +1,292 @@
+"""The live view in a real browser (issue 21, item 3): Foxglove Studio 1.48
+(tools/viewer: the prebuilt web build of @foxglove/studio-base with the
+project's layout, tools/foxglove/servoamp-layout.json) in Debian's Chromium,
+connected to `servoamp bridge` (Bridge.ws_url, the URL it prints) in front of
+the real telemetry server (telem_feed with its stand-in parameter service).
+tools/viewer/drive.mjs (playwright-core) looks at the page as a user does
+and reports what it shows; everything runs on 127.0.0.1.
+
+Order of events: the feed holds its cycles back until a second telemetry
+client comes (--wait-clients 2; it answers parameter requests meanwhile), so
+the page is connected and every panel subscribed before the first cycle,
+and sees the whole stream: the controller restart the feed announces 2 s in
+(--restart-at) reaches the gap panel whatever the page's load time was."""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import signal
+import socket
+import subprocess
+import threading
+import time
+from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from typing import Any
+from urllib.parse import quote
+
+import pytest
+
+from recorder_helpers import TOP, Feed
+from servoamp import bridge, info
+from servoamp import telemetry as tw
+
+TOKEN = "viewer-test-token-0123"
+RATE = 200            # cycles per second (Hz)
+AXES = 4
+STREAM_S = 6          # then the cycles stop; the server stays (--hold)
+CYCLES = RATE * STREAM_S
+GOOD, BAD = 70, 5000  # pos_kp: in [0, 1000] (taken), out of range (refused)
+OUT = TOP / "build" / "viewer"
+VIEWER = TOP / "tools" / "viewer"
+DRIVE = VIEWER / "drive.mjs"
+DRIVER_TIMEOUT_S = 100
+
+
+class _Quiet(SimpleHTTPRequestHandler):
+    def log_message(self, format: str, *args: Any) -> None:
+        return None
+
+
+def _serve_tools() -> ThreadingHTTPServer:
+    """tools/ over HTTP on 127.0.0.1: the page at /viewer/, the layout at /foxglove/."""
+    srv = ThreadingHTTPServer(("127.0.0.1", 0),
+                              functools.partial(_Quiet, directory=str(TOP / "tools")))
+    srv.daemon_threads = True
+    threading.Thread(target=srv.serve_forever, daemon=True).start()
+    return srv
+
+
+def _second_client(port: int, stop: threading.Event) -> threading.Thread:
+    """A telemetry client that reads and drops everything: the feed's cue to start."""
+    s = socket.create_connection(("127.0.0.1", port), timeout=10)
+    s.sendall(tw.encode_auth(TOKEN))
+    s.settimeout(0.2)
+
+    def drain() -> None:
+        with s:
+            while not stop.is_set():
+                try:
+                    if not s.recv(1 << 16):
+                        return
+                except socket.timeout:
+                    continue
+                except OSError:
+                    return
+
+    t = threading.Thread(target=drain, daemon=True)
+    t.start()
+    return t
+
+
+@pytest.fixture(scope="module")
+def live(feed_bin: Path, viewer_ready: None, tmp_path_factory: pytest.TempPathFactory
+         ) -> dict[str, Any]:
+    OUT.mkdir(parents=True, exist_ok=True)
+    for f in OUT.glob("*.png"):
+        f.unlink()
+    mcap = tmp_path_factory.mktemp("viewer") / "live.mcap"
+    feed = Feed(feed_bin, "--cycles", str(CYCLES), "--hold", "--rate", str(RATE), "--axes",
+                str(AXES), "--params", "--token", TOKEN, "--wait-clients", "2",
+                "--wait-timeout", "150",
+                "--log-every", str(RATE // 2), "--queues-every", str(RATE // 10),
+                "--restart-at", str(2 * RATE))
+    b = bridge.Bridge("127.0.0.1", feed.port, token=TOKEN, ws_port=0, mcap=mcap,
+                      reconnect=False)
+    stop = threading.Event()
+    run_res: list[Any] = []
+    runner = threading.Thread(target=lambda: run_res.append(b.run(duration=300, stop=stop)),
+                              daemon=True)
+    runner.start()
+    http = _serve_tools()
+    events: dict[str, dict[str, Any]] = {}
+    drv: subprocess.Popen[str] | None = None
+    try:
+        assert b.ws_url is not None
+        page = (f"http://127.0.0.1:{http.server_address[1]}/viewer/index.html"
+                f"?url={quote(b.ws_url, safe='')}")
+        drv = subprocess.Popen(
+            ["node", str(DRIVE), "--page", page, "--out", str(OUT), "--param", "pos_kp",
+             "--good", str(GOOD), "--bad", str(BAD), "--timeout", "90",
+             "--min-cycles", str(CYCLES)],
+            cwd=VIEWER, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=dict(os.environ, NODE_NO_WARNINGS="1"))
+        assert drv.stdout is not None
+        err_lines: list[str] = []
+        assert drv.stderr is not None
+        threading.Thread(target=lambda: err_lines.extend(drv.stderr), daemon=True).start()  # type: ignore[union-attr]
+        deadline = time.monotonic() + DRIVER_TIMEOUT_S + 30
+        for line in drv.stdout:
+            ev = json.loads(line)
+            events[ev["event"]] = ev
+            if ev["event"] == "ready":
+                # the page is connected and subscribed: let the cycles flow
+                _second_client(feed.port, stop)
+            if ev["event"] in ("result", "error") or time.monotonic() > deadline:
+                break
+        drv.wait(timeout=60)
+        stop.set()
+        runner.join(timeout=30)
+        feed.proc.send_signal(signal.SIGTERM)
+        fres = feed.result()
+    finally:
+        stop.set()
+        if drv is not None and drv.poll() is None:
+            drv.kill()
+            drv.communicate()
+        http.shutdown()
+        http.server_close()
+        b.close()
+        feed.kill()
+    if "result" not in events:  # pytest.fail: no AssertionError for the xfail below to take
+        pytest.fail(f"the driver failed: {events}\n{''.join(err_lines)[-4000:]}")
+    return {"page": events["result"], "ready": events["ready"], "feed": fres,
+            "run": run_res[0] if run_res else None, "mcap": mcap, "bridge": b,
+            "log": "".join(err_lines)}
+
+
+def _count(s: str) -> int:
+    return int(s.replace(",", "")) if s.replace(",", "").isdigit() else 0
+
+
+def test_page_loads_studio_locally_without_errors(live: dict[str, Any]) -> None:
+    p = live["page"]
+    assert p["blocked"] == [], "the page asked for something beyond 127.0.0.1"
+    assert p["pageErrors"] == []
+    # Studio's problems: none while the data flows (player errors, status
+    # messages from the bridge, schema errors)
+    before = p["problems_before"]
+    assert before["tab"] == "Problems", before  # no count on the tab
+    assert before["list"]["none"] and before["list"]["items"] == [], before
+    assert p["panels_in_layout"] and set(p["text_panels"]) | set(p["plots"]) | {
+        "Parameters!params"} == set(p["panels_in_layout"])
+
+
+def test_topics_show_every_cycle_and_the_rate(live: dict[str, Any]) -> None:
+    topics = live["page"]["topics"]
+    assert set(live["ready"]["topics"]) == set(bridge.TOPICS)
+    cyc = topics[bridge.T_CYCLE]
+    # every cycle reached the page (none lost on the way: SDK backlog, front, Studio)
+    assert _count(cyc["count"]) == live["feed"]["sent"] == CYCLES
+    # the rate Studio shows is the rate its browser received and parsed them
+    # at (wall clock): a number, not checked against the feed's (no speed test)
+    print(f"Studio: {cyc['count']} cycles, {cyc['frequency']} (the feed: {RATE} Hz)")
+    assert cyc["frequency"].endswith(" Hz") and float(cyc["frequency"].split()[0]) > 0, cyc
+    for t in (bridge.T_LOG, bridge.T_STATS, bridge.T_QUEUES, bridge.T_GAP):
+        assert _count(topics[t]["count"]) >= 1, (t, topics[t])
+
+
+def _layout() -> dict[str, Any]:
+    return dict(json.loads((TOP / "tools" / "foxglove" / "servoamp-layout.json").read_text()))
+
+
+def _expected(topic: str) -> int:
+    """Messages the feed sent on a topic the plots read."""
+    return {bridge.T_CYCLE: CYCLES, bridge.T_QUEUES: CYCLES // (RATE // 10)}[topic]
+
+
+def test_every_panel_type_is_checked() -> None:
+    kinds = {pid.split("!")[0] for pid in _layout()["configById"]}
+    assert kinds <= {"Plot", "RosOut", "RawMessages", "Table", "Parameters"}, \
+        f"tests/viewer does not know how to check {kinds}"
+
+
+def test_every_plot_has_every_point(live: dict[str, Any]) -> None:
+    """Each plot panel's own data (its 'Download plot data as CSV'): every
+    curve of the layout has a point for every message, and they are the
+    feed's signals."""
+    cfgs = _layout()["configById"]
+    plots = live["page"]["plots"]
+    assert set(plots) == {k for k in cfgs if k.startswith("Plot!")}
+    for pid, cfg in cfgs.items():
+        if not pid.startswith("Plot!"):
+            continue
+        series = plots[pid]["series"]
+        for path in cfg["paths"]:
+            label = path.get("label") or path["value"]
+            s = series.get(label)
+            assert s is not None, f"{pid}: no data for {label!r} ({path['value']}): {series}"
+            n = _expected(path["value"].split(".")[0])
+            if path["value"].endswith(".@derivative"):
+                assert s["n"] == n - 1 and s["finite"] > 0, (pid, label, s)
+            else:
+                assert s["n"] == s["finite"] == n, (pid, label, s)
+    ax = plots["Plot!axis0"]["series"]
+    # axis 0 follows a circle of radius 100000 increments (telem_feed)
+    assert ax["command"]["max"] > 90_000 and ax["command"]["min"] < -90_000
+    xy = plots["Plot!xycmd"]["series"]["commanded"]
+    assert xy["xmax"] > 90_000 and xy["xmin"] < -90_000 and xy["max"] > 90_000
+    ferr = plots["Plot!ferr"]["series"]
+    assert len(ferr) == AXES and all(s["max"] > s["min"] for s in ferr.values())
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "Studio 1.48's WebSocket player stamps a live message with the browser's clock when it "
+    "parses it (receiveTime = Date.now(), 1 ms steps), not with its log time, and the bridge "
+    "publishes no time: a derivative over receive time divides by 0 or 1 ms between messages "
+    "parsed together (Infinity, 1000, ...), not by the cycle period"))
+def test_cycle_rate_plot_shows_the_rate(live: dict[str, Any]) -> None:
+    cfgs = _layout()["configById"]
+    found = [(pid, p.get("label") or p["value"]) for pid, c in cfgs.items()
+             if pid.startswith("Plot!") for p in c["paths"]
+             if p["value"] == f"{bridge.T_CYCLE}.cycle.@derivative"]
+    if not found:
+        pytest.skip("the layout has no cycle-rate plot")
+    for pid, label in found:
+        s = live["page"]["plots"][pid]["series"][label]
+        assert s["finite"] >= 0.9 * s["n"], (pid, s)
+        assert abs(s["median"] - RATE) < 0.1 * RATE, (pid, s)
+
+
+def test_text_panels_show_messages(live: dict[str, Any]) -> None:
+    panels = live["page"]["text_panels"]
+    for pid, cfg in _layout()["configById"].items():
+        kind = pid.split("!")[0]
+        if kind in ("Plot", "Parameters"):
+            continue
+        text = panels[pid]["text"]
+        if kind == "RosOut":
+            assert text.count("heartbeat: cycle") >= 3, text[:2000]
+            assert "servo re-attached" in text  # the restart's warning
+        elif kind == "RawMessages":
+            topic = cfg["topicPath"]
+            assert text.startswith(f"servoamp.{bridge.CHANNELS[topic]} @"), (pid, text)
+            if topic == bridge.T_GAP:
+                assert '"controller_restart"' in text, text
+        elif kind == "Table":
+            # /servoamp/stats.counters: the feed's counters, one row each
+            assert cfg["topicPath"] == f"{bridge.T_STATS}.counters"
+            rows = dict(line.split("\t")[-2:] for line in text.splitlines() if "\t" in line)
+            assert rows.get("restarts") == "1" and int(rows["exchanges"]) > CYCLES // 2, rows
+
+
+def test_parameter_set_from_the_parameters_panel(live: dict[str, Any]) -> None:
+    p = live["page"]
+    assert p["set_good"]["before"]["input"] == "50"
+    assert float(p["set_good"]["shown"]) == GOOD
+    # the controller took it: the bridge's parameter table and its ParamChange
+    b = live["bridge"]
+    assert b.params["pos_kp"].value == GOOD
+    s = info.summarize(live["mcap"])
+    assert [(c["name"], c["value"]) for c in s["parameter_changes"]] == [("pos_kp", float(GOOD))]
+
+
+def test_refused_value_shows_as_an_error(live: dict[str, Any]) -> None:
+    bad = live["page"]["set_bad"]
+    msgs = [m for m in bad["problems"] if "pos_kp" in m]
+    assert len(msgs) == 1 and f"{BAD}" in msgs[0] and "out of range [0, 1000]" in msgs[0], bad
+    assert bad["problems_tab"]["tab"].startswith("Problems") and bad["problems_tab"]["tab"].endswith("1")
+    # the panel shows the value the controller kept
+    assert float(bad["shown_after"]) == GOOD
+    assert float(live["page"]["params_final"]["row"]["input"]) == GOOD
+
+
+def test_nothing_lost_and_screenshots_kept(live: dict[str, Any]) -> None:
+    fres = live["feed"]
+    assert fres["dropped"] == 0 and fres["client_lost"] == 0, fres
+    run = live["run"]
+    assert run is not None and run.cycles == fres["sent"]
+    for f in ("studio-host.png", "studio-param-refused.png"):
+        assert (OUT / f).stat().st_size > 20_000, f
