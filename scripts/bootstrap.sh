@@ -31,7 +31,7 @@ sudo_cmd=""
 
 apt_host=(build-essential gcc make pkg-config python3-venv git
 	gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi
-	clang libclang-rt-14-dev spin)
+	clang libclang-rt-14-dev spin chromium)
 apt_board=(gcc-arm-linux-gnueabihf binutils-arm-linux-gnueabihf
 	device-tree-compiler linux-source-6.1 bc bison flex libssl-dev
 	libelf-dev cpio xz-utils kmod python3-minimal libc6-dev-armhf-cross)
@@ -74,12 +74,16 @@ if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$key" ]; t
 	quiet "$venv/bin/python" -m pip install -e ".[dev]"
 	echo "$key" >"$stamp"
 fi
-# Node: the independent MCAP reader used by tests/recorder (tools/mcap-verify).
-mv_dir="$here/tools/mcap-verify"; mv_key=$(sha256sum "$mv_dir/package-lock.json" | cut -d' ' -f1)
-if command -v npm >/dev/null && { [ ! -d "$mv_dir/node_modules" ] || [ "$(cat "$mv_dir/node_modules/.servoamp-stamp" 2>/dev/null)" != "$mv_key" ]; }; then
-	log "npm ci in tools/mcap-verify"
-	(cd "$mv_dir" && quiet npm ci --no-audit --no-fund --ignore-scripts --loglevel=error) && echo "$mv_key" >"$mv_dir/node_modules/.servoamp-stamp"
-fi
+# Node, each keyed by its lock file: the independent MCAP reader used by
+# tests/recorder (tools/mcap-verify), and Foxglove Studio's web build with
+# playwright-core for the live-view test in Chromium (tools/viewer, tests/viewer).
+for nd in mcap-verify viewer; do
+	mv_dir="$here/tools/$nd"; mv_key=$(sha256sum "$mv_dir/package-lock.json" | cut -d' ' -f1)
+	if command -v npm >/dev/null && { [ ! -d "$mv_dir/node_modules" ] || [ "$(cat "$mv_dir/node_modules/.servoamp-stamp" 2>/dev/null)" != "$mv_key" ]; }; then
+		log "npm ci in tools/$nd"
+		(cd "$mv_dir" && quiet npm ci --no-audit --no-fund --ignore-scripts --loglevel=error) && echo "$mv_key" >"$mv_dir/node_modules/.servoamp-stamp"
+	fi
+done
 # Our QEMU (Debian's source + emulator/qemu/patches), cached by its inputs:
 # about 10 minutes the first time, a second afterwards.
 [ "$scope" = host ] || emulator/qemu/build.sh
