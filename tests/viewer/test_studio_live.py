@@ -10,7 +10,12 @@ Order of events: the feed holds its cycles back until a second telemetry
 client comes (--wait-clients 2; it answers parameter requests meanwhile), so
 the page is connected and every panel subscribed before the first cycle,
 and sees the whole stream: the controller restart the feed announces 2 s in
-(--restart-at) reaches the gap panel whatever the page's load time was."""
+(--restart-at) reaches the gap panel whatever the page's load time was. The
+stream is bounded (6 s at 200 Hz, then --hold keeps the server up for the
+parameters): Studio 1.48 in headless Chromium without a GPU keeps every point
+of every curve and redraws them all, which on 2 shared cores falls behind a
+stream of 1 kHz within seconds. The driver's steps wait with generous
+timeouts; nothing here measures speed."""
 
 from __future__ import annotations
 
@@ -21,7 +26,6 @@ import signal
 import socket
 import subprocess
 import threading
-import time
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Any
@@ -42,7 +46,7 @@ GOOD, BAD = 70, 5000  # pos_kp: in [0, 1000] (taken), out of range (refused)
 OUT = TOP / "build" / "viewer"
 VIEWER = TOP / "tools" / "viewer"
 DRIVE = VIEWER / "drive.mjs"
-DRIVER_TIMEOUT_S = 100
+DRIVER_TIMEOUT_S = 240  # the whole driver, at worst (it takes about 60 s)
 
 
 class _Quiet(SimpleHTTPRequestHandler):
@@ -102,6 +106,7 @@ def live(feed_bin: Path, viewer_ready: None, tmp_path_factory: pytest.TempPathFa
     runner.start()
     http = _serve_tools()
     events: dict[str, dict[str, Any]] = {}
+    err_lines: list[str] = []
     drv: subprocess.Popen[str] | None = None
     try:
         assert b.ws_url is not None
@@ -113,20 +118,19 @@ def live(feed_bin: Path, viewer_ready: None, tmp_path_factory: pytest.TempPathFa
              "--min-cycles", str(CYCLES)],
             cwd=VIEWER, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             env=dict(os.environ, NODE_NO_WARNINGS="1"))
-        assert drv.stdout is not None
-        err_lines: list[str] = []
-        assert drv.stderr is not None
-        threading.Thread(target=lambda: err_lines.extend(drv.stderr), daemon=True).start()  # type: ignore[union-attr]
-        deadline = time.monotonic() + DRIVER_TIMEOUT_S + 30
-        for line in drv.stdout:
+        out, err = drv.stdout, drv.stderr
+        assert out is not None and err is not None
+        threading.Thread(target=lambda: err_lines.extend(err), daemon=True).start()
+        watchdog = threading.Timer(DRIVER_TIMEOUT_S, drv.kill)
+        watchdog.start()
+        for line in out:
             ev = json.loads(line)
             events[ev["event"]] = ev
             if ev["event"] == "ready":
                 # the page is connected and subscribed: let the cycles flow
                 _second_client(feed.port, stop)
-            if ev["event"] in ("result", "error") or time.monotonic() > deadline:
-                break
         drv.wait(timeout=60)
+        watchdog.cancel()
         stop.set()
         runner.join(timeout=30)
         feed.proc.send_signal(signal.SIGTERM)
@@ -155,6 +159,8 @@ def test_page_loads_studio_locally_without_errors(live: dict[str, Any]) -> None:
     p = live["page"]
     assert p["blocked"] == [], "the page asked for something beyond 127.0.0.1"
     assert p["pageErrors"] == []
+    # the console's errors: only Studio's report of the refused set (below)
+    assert all(f"pos_kp {BAD}: refused" in e for e in p["consoleErrors"]), p["consoleErrors"]
     # Studio's problems: none while the data flows (player errors, status
     # messages from the bridge, schema errors)
     before = p["problems_before"]

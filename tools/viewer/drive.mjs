@@ -178,8 +178,8 @@ try {
     const params = document.querySelector('[data-testid="panel-mouseenter-container Parameters!params"]');
     const hasParam = params ? [...params.querySelectorAll("tr")].some((tr) => tr.innerText.trim().split(/\s/)[0] === a.param) : false;
     const ok = missing.length === 0 && topics.length > 0 && hasParam;
-    return { ok, missing, topics, hasParam, source: document.body.innerText.includes(a.host) };
-  }, { ids: panelIds, param: opt.param, host: new URL(new URLSearchParams(new URL(opt.page).search).get("url")).host });
+    return { ok, missing, topics, hasParam };
+  }, { ids: panelIds, param: opt.param });
   result.topics_advertised = ready.topics;
   emit({ event: "ready", topics: ready.topics, panels: panelIds });
 
