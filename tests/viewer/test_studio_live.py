@@ -11,11 +11,12 @@ client comes (--wait-clients 2; it answers parameter requests meanwhile), so
 the page is connected and every panel subscribed before the first cycle,
 and sees the whole stream: the controller restart the feed announces 2 s in
 (--restart-at) reaches the gap panel whatever the page's load time was. The
-stream is bounded (6 s at 200 Hz, then --hold keeps the server up for the
+stream is bounded (3 s at 1 kHz, then --hold keeps the server up for the
 parameters): Studio 1.48 in headless Chromium without a GPU keeps every point
-of every curve and redraws them all, which on 2 shared cores falls behind a
-stream of 1 kHz within seconds. The driver's steps wait with generous
-timeouts; nothing here measures speed."""
+of every curve and redraws them all, and on 2 shared cores takes it in at a
+few hundred messages a second, so an endless 1 kHz stream would leave it
+ever further behind. The driver's steps wait with generous timeouts for
+every message; nothing here measures speed."""
 
 from __future__ import annotations
 
@@ -38,9 +39,9 @@ from servoamp import bridge, info
 from servoamp import telemetry as tw
 
 TOKEN = "viewer-test-token-0123"
-RATE = 200            # cycles per second (Hz)
+RATE = 1000           # cycles per second (Hz): servod's default cycle_period_us
 AXES = 4
-STREAM_S = 6          # then the cycles stop; the server stays (--hold)
+STREAM_S = 3          # then the cycles stop; the server stays (--hold)
 CYCLES = RATE * STREAM_S
 GOOD, BAD = 70, 5000  # pos_kp: in [0, 1000] (taken), out of range (refused)
 OUT = TOP / "build" / "viewer"
