@@ -9,6 +9,9 @@
  */
 	.syntax unified
 	.arm
+
+/* FPSCR for fpu_nest_probe: RMode 0b11 (towards zero), IOC and DZC set */
+#define FPSCR_PATTERN 0x00c00003
 	.section .text.cpu, "ax"
 
 /*
@@ -112,3 +115,62 @@ cpu_park:
 	dsb
 	bx	r4			/* park loop (ARM code in OCM) */
 	.size cpu_park, . - cpu_park
+
+/*
+ * fpu_nest_probe(sgir, word, seen): the nesting self-test's VFP half.
+ * r0 = the GIC's SGI register, r1 = the word that sends the test SGI to
+ * this core, r2 = the SGI handler's counter. Called from the cycle
+ * handler: fills d0-d7 and FPSCR (round towards zero, IOC and DZC set)
+ * with patterns, raises the SGI, whose handler (higher priority: it
+ * preempts at once) computes with the VFP, waits until the counter
+ * moves, then checks that every register came back. Returns 0: all
+ * back; 1..8: d0..d7 changed (the first one + 1); 9: FPSCR changed;
+ * 10: the SGI never came. In assembly, so that no call or spill stands
+ * between the patterns and the check. FPSCR is 0 again on return.
+ */
+	.global fpu_nest_probe
+	.type fpu_nest_probe, %function
+fpu_nest_probe:
+	push	{r4-r8, lr}
+	ldr	r4, [r2]		/* the counter before */
+	ldr	r8, =0x01010101
+	mov	r5, #0
+	.irp	i, 0, 1, 2, 3, 4, 5, 6, 7
+	add	r5, r5, r8
+	mvn	r6, r5
+	vmov	d\i, r5, r6
+	.endr
+	ldr	r3, =FPSCR_PATTERN
+	vmsr	fpscr, r3
+	dsb
+	str	r1, [r0]		/* the SGI */
+	dsb
+	ldr	r7, =0x10000
+1:	ldr	r3, [r2]
+	cmp	r3, r4
+	bne	2f
+	subs	r7, r7, #1
+	bne	1b
+	mov	r0, #10
+	b	9f
+2:	mov	r5, #0
+	.irp	i, 0, 1, 2, 3, 4, 5, 6, 7
+	add	r5, r5, r8
+	mvn	r6, r5
+	vmov	r3, r12, d\i
+	cmp	r3, r5
+	cmpeq	r12, r6
+	movne	r0, #(\i + 1)
+	bne	9f
+	.endr
+	vmrs	r3, fpscr
+	ldr	r12, =FPSCR_PATTERN
+	cmp	r3, r12
+	movne	r0, #9
+	bne	9f
+	mov	r0, #0
+9:	mov	r3, #0
+	vmsr	fpscr, r3
+	pop	{r4-r8, pc}
+	.size fpu_nest_probe, . - fpu_nest_probe
+	.ltorg

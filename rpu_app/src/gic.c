@@ -121,8 +121,17 @@ uint32_t gic_running_priority(void)
 void gic_sgi_self(uint32_t id)
 {
 	dsb();
-	/* TargetListFilter = 0b10: this core only. */
-	mmio_write32(D(GICD_SGIR), (2u << 24) | (id & 15u));
+	*gic_sgir() = gic_sgi_self_word(id);
+}
+
+volatile uint32_t *gic_sgir(void)
+{
+	return (volatile uint32_t *)D(GICD_SGIR);
+}
+
+uint32_t gic_sgi_self_word(uint32_t id)
+{
+	return (2u << 24) | (id & 15u);	/* TargetListFilter = 0b10: this core only */
 }
 
 static int gic_active(uint32_t id)

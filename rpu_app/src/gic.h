@@ -23,6 +23,10 @@ uint32_t gic_ack(void);
 void gic_eoi(uint32_t iar);
 uint32_t gic_running_priority(void);
 void gic_sgi_self(uint32_t id);
+/* The SGI register and the word that sends SGI id to this core only (for
+ * code that must raise one without a call: fpu_nest_probe). */
+volatile uint32_t *gic_sgir(void);
+uint32_t gic_sgi_self_word(uint32_t id);
 
 /*
  * Start: complete the interrupts an earlier run of the firmware left active

@@ -8,6 +8,7 @@
  * statistics, UART draining, WFI between cycles.
  */
 #include <stdint.h>
+#include <string.h>
 
 #include "arch.h"
 #include "board.h"
@@ -45,12 +46,42 @@ static volatile uint32_t period_changed, last_period_ns;
 static uint32_t period_min, period_max, overruns, missed;
 static volatile uint32_t sgi_stamp, sgi_seen;
 static uint32_t nest_ok, nest_fail;
+/* The VFP half of the self-test (fpu_nest_probe, cpu.S): the SGI handler
+ * computes fpu_work() from fpu_in; its result must equal the one computed
+ * outside any interrupt, and the cycle handler's registers must come back. */
+static volatile float fpu_in;	/* 1.7f, set at start (no .data) */
+static volatile uint32_t fpu_res, fpu_ref;
+static uint32_t fpu_ok, fpu_fail, fpu_fail_why;
+
+uint32_t fpu_nest_probe(volatile uint32_t *sgir, uint32_t word, volatile uint32_t *seen);
+
+static uint32_t fpu_bits(float f)
+{
+	uint32_t u;
+
+	memcpy(&u, &f, sizeof(u));
+	return u;
+}
+
+/* Dependent float operations, inexact on purpose (they set IXC). */
+static float fpu_work(float x)
+{
+	float a = x, b = 1.0f / 3.0f, c = 0.0f;
+
+	for (int i = 0; i < 8; i++) {
+		c = c * 0.5f + a * b;
+		a = a + b;
+		b = b * 1.25f;
+	}
+	return c;
+}
 static uint64_t gt_start;
 static struct gic_drain drain;	/* what the start found active (gic.h) */
 
 static void nest_test_handler(void *arg)
 {
 	(void)arg;
+	fpu_res = fpu_bits(fpu_work(fpu_in));
 	sgi_seen++;
 }
 
@@ -105,16 +136,22 @@ static void cycle_handler(void *arg)
 	/* Nesting self-test, once per statistics interval: a higher-priority
 	 * SGI to this core must preempt this handler before it returns. */
 	if ((c + 1u) % BOARD_STATS_CYCLES == BOARD_STATS_CYCLES / 2u) {
-		uint32_t before = sgi_seen;
+		uint32_t r;
 
+		fpu_res = 0;
 		sgi_stamp = gtimer_now32();
-		gic_sgi_self(BOARD_NEST_TEST_SGI);
-		for (uint32_t i = 0; i < 10000u && sgi_seen == before; i++)
-			compiler_barrier();
-		if (sgi_seen != before)
-			nest_ok++;
-		else
+		r = fpu_nest_probe(gic_sgir(), gic_sgi_self_word(BOARD_NEST_TEST_SGI), &sgi_seen);
+		if (r == 10u) {
 			nest_fail++;
+		} else {
+			nest_ok++;
+			if (r == 0u && fpu_res == fpu_ref) {
+				fpu_ok++;
+			} else {
+				fpu_fail++;
+				fpu_fail_why = r ? r : 11u;	/* 11: the handler's own result wrong */
+			}
+		}
 	}
 	if (link_debug.overload) {	/* debug: as if this handler outlasted the period */
 		link_debug.overload = 2;	/* in effect */
@@ -162,10 +199,11 @@ static void print_stats(void)
 	irq_restore(flags);
 	log_get_stats(&ls);
 	log_printf("stats cycle=%u guest_us=%u period_min_ns=%u period_max_ns=%u overruns=%u missed=%u nest_max=%u "
-		   "nest_test_ok=%u nest_test_fail=%u\n",
+		   "nest_test_ok=%u nest_test_fail=%u fpu_test_ok=%u fpu_test_fail=%u fpu_test_why=%u\n",
 		   (unsigned)c, (unsigned)((gtimer_now() - gt_start) / BOARD_GTIMER_TICKS_PER_US),
 		   (unsigned)(c > 1u ? pmin : 0u), (unsigned)pmax, (unsigned)ovr, (unsigned)mis,
-		   (unsigned)irq_nest_max(), (unsigned)nest_ok, (unsigned)nest_fail);
+		   (unsigned)irq_nest_max(), (unsigned)nest_ok, (unsigned)nest_fail, (unsigned)fpu_ok,
+		   (unsigned)fpu_fail, (unsigned)fpu_fail_why);
 	print_irq_stats(BOARD_CYCLE_IRQ);
 	print_irq_stats(BOARD_NEST_TEST_SGI);
 	log_printf("stats link=%s attached=%d hb=%u spurious=%u unhandled=%u irq_disabled=%u "
@@ -254,6 +292,9 @@ __attribute__((noreturn)) void servo_main(void)
 	period_changed = 0;
 	sgi_stamp = sgi_seen = 0;
 	nest_ok = nest_fail = 0;
+	fpu_ok = fpu_fail = fpu_fail_why = 0;
+	fpu_in = 1.7f;
+	fpu_ref = fpu_bits(fpu_work(fpu_in));	/* outside any interrupt */
 
 #if CONFIG_MMU
 	mmu_init();

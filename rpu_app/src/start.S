@@ -86,6 +86,17 @@ _start:
 	strdlo	r2, r3, [r0], #8
 	blo	2b
 
+	/* VFP on before any C (built -mfloat-abi=hard): CP10/CP11 full
+	 * access in CPACR, then FPEXC.EN; FPSCR: round to nearest, no traps. */
+	mrc	p15, 0, r0, c1, c0, 2
+	orr	r0, r0, #(0xf << 20)
+	mcr	p15, 0, r0, c1, c0, 2
+	isb
+	mov	r0, #(1 << 30)
+	vmsr	fpexc, r0
+	mov	r0, #0
+	vmsr	fpscr, r0
+
 	mov	fp, #0
 	bl	servo_main
 	b	.			/* servo_main never returns */
@@ -101,6 +112,15 @@ _start:
  * only signals priorities above the running one) can then preempt the
  * handler. Caller-saved registers and lr_svc are saved; the C code saves
  * the rest (AAPCS). The stack is 8-byte aligned for the C call.
+ *
+ * The VFP's caller-saved state is saved too, on every nesting level: d0-d7
+ * and FPSCR (d8-d15 are callee-saved, kept by the C code; the firmware is
+ * built for VFPv3-D16, so there is no d16-d31). A handler that preempts
+ * float code (the cycle's controller) at any instruction leaves its
+ * registers and flags as they were, and runs itself with the default
+ * FPSCR (round to nearest, no flags), whatever the code it preempted set.
+ * The nesting self-test checks it every statistics interval
+ * (fpu_nest_probe, cpu.S).
  */
 	.section .text.irq, "ax"
 	.global irq_entry
@@ -110,12 +130,18 @@ irq_entry:
 	srsdb	sp!, #MODE_SVC		/* push lr_irq, spsr_irq on the SVC stack */
 	cps	#MODE_SVC
 	push	{r0-r3, r12, lr}
+	vpush	{d0-d7}
+	vmrs	r2, fpscr
+	mov	r0, #0			/* handlers run with the default FPSCR */
+	vmsr	fpscr, r0
 	and	r1, sp, #4		/* 8-byte align for AAPCS */
 	sub	sp, sp, r1
-	push	{r1, r2}
+	push	{r1, r2}		/* the alignment, FPSCR */
 	bl	irq_dispatch
 	pop	{r1, r2}
 	add	sp, sp, r1
+	vmsr	fpscr, r2
+	vpop	{d0-d7}
 	pop	{r0-r3, r12, lr}
 	rfeia	sp!			/* pc and cpsr from the SVC stack */
 	.size irq_entry, . - irq_entry

@@ -20,7 +20,8 @@ from qemu_rpu import QemuRpu
 pytestmark = pytest.mark.skipif(qemu_ok() is not None, reason=qemu_ok() or "")
 
 STATS_RE = (r"^stats cycle=(\d+) guest_us=(\d+) period_min_ns=(\d+) period_max_ns=(\d+) overruns=(\d+) "
-            r"missed=(\d+) nest_max=(\d+) nest_test_ok=(\d+) nest_test_fail=(\d+)$")
+            r"missed=(\d+) nest_max=(\d+) nest_test_ok=(\d+) nest_test_fail=(\d+) "
+            r"fpu_test_ok=(\d+) fpu_test_fail=(\d+) fpu_test_why=(\d+)$")
 IRQ_RE = r"^stats irq={id} count=(\d+) lat_min_ns=(\d+) lat_mean_ns=(\d+) lat_max_ns=(\d+) nest_max=(\d+)$"
 
 
@@ -104,6 +105,12 @@ def test_boot_cycle_irq_stats_and_trace(rpu_build, board_cfg, tmp_path):
         assert int(stats[1].group(9)) == 0, "nesting self-test failed"
         assert int(stats[1].group(8)) >= 1
         assert int(stats[1].group(7)) == 2, "nested depth 2 expected (SGI inside the cycle handler)"
+        # the VFP half: the cycle handler's d0-d7 and FPSCR came back from the
+        # float-using SGI handler, whose own result was right (fpu_nest_probe)
+        assert int(stats[1].group(11)) == 0, \
+            f"VFP state lost across the nested handler (why {stats[1].group(12)}: 1-8 d0-d7, " \
+            "9 FPSCR, 11 the handler's result)"
+        assert int(stats[1].group(10)) >= 1
 
         cyc = q.wait_uart(IRQ_RE.format(id=board_cfg["BOARD_CYCLE_IRQ"]), count=2)[1]
         count, lmin, lmean, lmax, nest = map(int, cyc.groups())
