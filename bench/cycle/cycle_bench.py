@@ -152,6 +152,19 @@ def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
                  "value": round(srv["cost_ticks_10ns_since_start"]["cycle"]["max"] / 100, 2),
                  "note": f"mean {srv['cost_ticks_10ns_since_start']['cycle']['mean'] / 100:.1f} us"},
             ]
+            # per stage in instructions: under -icount shift=0 one instruction
+            # is 1 ns of guest time, and the firmware counts in 10 ns ticks
+            if mode == "virtual":
+                cost = srv["cost_ticks_10ns_since_start"]
+                for stage in ("rx", "ctrl", "tx", "cycle"):
+                    out.append({"name": f"{k}_servo_{stage}_instructions", "unit": "instr",
+                                "better": "lower", "value": cost[stage]["mean"] * 10,
+                                "note": f"mean; max {cost[stage]['max'] * 10} since start"})
+                axes = srv.get("axes") or 1
+                out.append({"name": f"{k}_servo_ctrl_instructions_per_axis", "unit": "instr",
+                            "better": "lower", "value": round(cost["ctrl"]["mean"] * 10 / axes),
+                            "note": f"ctrl mean / {axes} axes (4 sub-steps each): an upper bound "
+                                    "on the per-axis slope"})
     return out
 
 
