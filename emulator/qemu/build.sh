@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Build servoamp's own qemu-system-arm 10.0.2 (Debian's source, with the
 # patches in patches/: a Cadence TTC fix so the Zynq-7000 board runs under
-# -icount without livelocking, and its qtest).
+# -icount without livelocking, and the other fixes and features README.md
+# lists, with their qtests).
 #
 #   emulator/qemu/build.sh            # build or reuse the cached QEMU
 #   emulator/qemu/build.sh --print    # same, then print the install directory
@@ -20,9 +21,9 @@
 #   qemu-src/qemu_10.0.2+ds.orig.tar.xz   downloaded once (shared)
 #   qemu-src/apt/                         the private APT state
 #   qemu/<key>/bin/qemu-system-arm        the install (prefix)
-#   qemu/<key>/libexec/servoamp/          the qtest regression test binary
+#   qemu/<key>/libexec/servoamp/          the qtest binaries (TTC, CAN)
 #   qemu/<key>/info, build.log, ok        results (ok = complete, the
-#                                         regression test passed)
+#                                         qtests passed)
 #   qemu/<key>/src, build                 patched source and build tree, removed
 #                                         after a successful build unless
 #                                         SERVOAMP_QEMU_KEEP_BUILD=1
@@ -68,8 +69,9 @@ config_opts=(
 	--disable-guest-agent
 	--disable-user
 )
-# ninja targets: the emulator, what `meson install` needs, the regression qtest
-targets=(qemu-system-arm trace/trace-events-all tests/qtest/cadence-ttc-test)
+# ninja targets: the emulator, what `meson install` needs, our qtests
+qtests=(cadence-ttc-test zynq-can-test)
+targets=(qemu-system-arm trace/trace-events-all "${qtests[@]/#/tests/qtest/}")
 
 log() { printf '[qemu] %s\n' "$*" >&2; }
 die() { printf '[qemu] error: %s\n' "$*" >&2; exit 1; }
@@ -221,18 +223,22 @@ done
 wait "$ninja_pid" || { tail -30 "$buildlog" >&2; die "build failed"; }
 trap - EXIT
 
-# 6. Install the emulator (prefix = $out) and the regression test.
+# 6. Install the emulator (prefix = $out) and the qtests.
 printf '== meson install\n' >>"$buildlog"
 (cd "$out/build" && ./pyvenv/bin/meson install --no-rebuild --quiet) >>"$buildlog" 2>&1 ||
 	{ tail -30 "$buildlog" >&2; die "install failed"; }
-install -D -m 0755 "$out/build/tests/qtest/cadence-ttc-test" "$out/libexec/servoamp/cadence-ttc-test"
+for t in "${qtests[@]}"; do
+	install -D -m 0755 "$out/build/tests/qtest/$t" "$out/libexec/servoamp/$t"
+done
 "$out/bin/qemu-system-arm" --version | head -1 | grep -q "version $version" ||
 	die "$out/bin/qemu-system-arm does not run"
 "$out/bin/qemu-system-arm" -M none -netdev help | grep -qx user || die "qemu-system-arm was built without slirp (user networking)"
-log "running the TTC regression test (run-regression-test.sh)"
-printf '== run-regression-test.sh\n' >>"$buildlog"
-"$here/run-regression-test.sh" "$out" >>"$buildlog" 2>&1 ||
-	{ tail -20 "$buildlog" >&2; die "the TTC regression test failed"; }
+for t in "${qtests[@]}"; do
+	log "running the qtest $t (run-regression-test.sh --test $t)"
+	printf '== run-regression-test.sh --test %s\n' "$t" >>"$buildlog"
+	"$here/run-regression-test.sh" "$out" --test "$t" >>"$buildlog" 2>&1 ||
+		{ tail -20 "$buildlog" >&2; die "the qtest $t failed"; }
+done
 
 secs=$(elapsed)
 du_src=$(du -sm "$out/src" | cut -f1)

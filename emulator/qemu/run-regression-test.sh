@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Run the Cadence TTC regression qtest (patches/0002, tests/qtest/
-# cadence-ttc-test.c) against a QEMU. Exits 0 when it passes, 1 when it fails,
+# Run one of our qtests against a QEMU: the Cadence TTC regression qtest
+# (patches/0002, tests/qtest/cadence-ttc-test.c) by default, or with
+# --test zynq-can-test the CAN controllers' (patches/0008,
+# tests/qtest/zynq-can-test.c). Exits 0 when it passes, 1 when it fails,
 # 124 when it times out (the unpatched TTC model livelocks in clock_step, so
-# a hang is the expected failure).
+# a hang is the expected failure there).
 #
 #   emulator/qemu/run-regression-test.sh                  # the cached build (build.sh --print)
 #   emulator/qemu/run-regression-test.sh DIR              # an install dir (bin/, libexec/servoamp/)
@@ -10,6 +12,7 @@
 #   emulator/qemu/run-regression-test.sh DIR --qemu BIN   # DIR's test binary against another
 #                                                         # qemu-system-arm, e.g. Debian's unpatched
 #                                                         # /usr/bin/qemu-system-arm (same 10.0.2)
+#   emulator/qemu/run-regression-test.sh [DIR] --test zynq-can-test
 #
 # Environment: SERVOAMP_QEMU_TEST_TIMEOUT (seconds, default 60; the test takes
 # about 2 s on a fixed QEMU).
@@ -19,11 +22,12 @@ here=$(cd "$(dirname "$0")" && pwd)
 log() { printf '[qemu-test] %s\n' "$*" >&2; }
 die() { printf '[qemu-test] error: %s\n' "$*" >&2; exit 2; }
 
-dir="" qemu=""
+dir="" qemu="" test=cadence-ttc-test
 while [ $# -gt 0 ]; do
 	case $1 in
 	--qemu) qemu=${2:?--qemu needs a path}; shift 2 ;;
-	-h | --help) sed -n '2,16p' "$0"; exit 0 ;;
+	--test) test=${2:?--test needs a name}; shift 2 ;;
+	-h | --help) sed -n '2,19p' "$0"; exit 0 ;;
 	*) [ -z "$dir" ] || die "one directory only"; dir=$1; shift ;;
 	esac
 done
@@ -31,10 +35,13 @@ done
 dir=$(cd "$dir" && pwd)
 
 test_bin=""
-for t in "$dir/libexec/servoamp/cadence-ttc-test" "$dir/tests/qtest/cadence-ttc-test"; do
+case $test in
+*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test)" ;;
+esac
+for t in "$dir/libexec/servoamp/$test" "$dir/tests/qtest/$test"; do
 	[ -x "$t" ] && { test_bin=$t; break; }
 done
-[ -n "$test_bin" ] || die "no cadence-ttc-test in $dir (libexec/servoamp/ or tests/qtest/)"
+[ -n "$test_bin" ] || die "no $test in $dir (libexec/servoamp/ or tests/qtest/)"
 if [ -z "$qemu" ]; then
 	for q in "$dir/bin/qemu-system-arm" "$dir/qemu-system-arm"; do
 		[ -x "$q" ] && { qemu=$q; break; }
