@@ -170,6 +170,8 @@ class Bridge:
         self.pending: dict[int, tuple[threading.Event, list[Any]]] = {}
         self.pending_lock = threading.Lock()
         self.hello: tw.Hello | None = None
+        # (cycle, t_ns) of the newest cycle record at the last STATS
+        self.prev_stats: tuple[int, int] | None = None
         self.n_axes = 0
         self.enc: Callable[[bytes | bytearray, int], bytes] | None = None
         self.csize = 0
@@ -408,6 +410,7 @@ class Bridge:
             self.pending_reconnect = (self.last_cycle, prev.session_id != h.session_id)
             self.expect = None
         self.hello = h
+        self.prev_stats = None  # the rate starts again on every connection
         self.res.controller_id = h.controller_id
         self.final_seen = False
         tick_ns = 1e9 / h.clock_hz if h.clock_hz else 0.0
@@ -462,6 +465,17 @@ class Bridge:
                 csize = self.csize
             elif typ == tw.MSG_STATS:
                 s = tw.decode_stats(p)
+                # the rate over the cycle records' own times (cycle counter
+                # and t_ns of the newest record at this STATS and the last)
+                rate = None
+                now = (self.last_cycle, t_ns) if self.last_cycle is not None else None
+                prev = self.prev_stats
+                if prev is not None and now is not None:
+                    if now[0] == prev[0]:
+                        rate = 0.0  # no cycle since: stopped, or recovering
+                    elif now[0] > prev[0] and now[1] > prev[1]:
+                        rate = (now[0] - prev[0]) * 1e9 / (now[1] - prev[1])
+                self.prev_stats = now
                 d = {"last_cycle": s.last_cycle, "pushed": s.pushed, "dropped": s.dropped,
                      "drained": s.drained, "client_lost": s.client_lost,
                      "client_events_lost": s.client_events_lost, "events": s.events,
@@ -474,7 +488,8 @@ class Bridge:
                     client_events_lost=s.client_events_lost, events=s.events,
                     events_dropped=s.events_dropped, bytes_sent=s.bytes_sent,
                     ring_high_water=s.ring_high_water, ring_capacity=s.ring_capacity,
-                    clients=s.clients, final=s.final, counters=s.counters).SerializeToString(),
+                    clients=s.clients, final=s.final, counters=s.counters,
+                    cycle_rate_hz=rate).SerializeToString(),
                     log_time=s.t_ns)
                 self.res.last_stats = dict(d, counters=s.counters)
                 self.final_seen = self.final_seen or s.final

@@ -35,7 +35,7 @@ from urllib.parse import quote
 import pytest
 
 from recorder_helpers import TOP, Feed
-from servoamp import bridge, info
+from servoamp import bridge, info, mcapio
 from servoamp import telemetry as tw
 
 TOKEN = "viewer-test-token-0123"
@@ -177,10 +177,11 @@ def test_topics_show_every_cycle_and_the_rate(live: dict[str, Any]) -> None:
     cyc = topics[bridge.T_CYCLE]
     # every cycle reached the page (none lost on the way: SDK backlog, front, Studio)
     assert _count(cyc["count"]) == live["feed"]["sent"] == CYCLES
-    # the rate Studio shows is the rate its browser received and parsed them
-    # at (wall clock): a number, not checked against the feed's (no speed test)
+    # the rate Studio's Topics list shows is the rate its browser received
+    # and parsed them at, over the last moments of wall clock ("—" once the
+    # bounded stream has ended): printed, not checked (no speed test); the
+    # cycle rate a user reads is the layout's rate plot
     print(f"Studio: {cyc['count']} cycles, {cyc['frequency']} (the feed: {RATE} Hz)")
-    assert cyc["frequency"].endswith(" Hz") and float(cyc["frequency"].split()[0]) > 0, cyc
     for t in (bridge.T_LOG, bridge.T_STATS, bridge.T_QUEUES, bridge.T_GAP):
         assert _count(topics[t]["count"]) >= 1, (t, topics[t])
 
@@ -215,7 +216,14 @@ def test_every_plot_has_every_point(live: dict[str, Any]) -> None:
             label = path.get("label") or path["value"]
             s = series.get(label)
             assert s is not None, f"{pid}: no data for {label!r} ({path['value']}): {series}"
-            n = _expected(path["value"].split(".")[0])
+            topic = path["value"].split(".")[0]
+            if topic == bridge.T_STATS:
+                # STATS go on while the feed holds its cycles back (its
+                # statistics are live): as many as arrived, each with a value
+                # (test_cycle_rate_plot_shows_the_rate checks them)
+                assert s["n"] >= 3 and s["finite"] == s["n"], (pid, label, s)
+                continue
+            n = _expected(topic)
             if path["value"].endswith(".@derivative"):
                 assert s["n"] == n - 1 and s["finite"] > 0, (pid, label, s)
             else:
@@ -229,22 +237,32 @@ def test_every_plot_has_every_point(live: dict[str, Any]) -> None:
     assert len(ferr) == AXES and all(s["max"] > s["min"] for s in ferr.values())
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "Studio 1.48's WebSocket player stamps a live message with the browser's clock when it "
-    "parses it (receiveTime = Date.now(), 1 ms steps), not with its log time, and the bridge "
-    "publishes no time: a derivative over receive time divides by 0 or 1 ms between messages "
-    "parsed together (Infinity, 1000, ...), not by the cycle period"))
 def test_cycle_rate_plot_shows_the_rate(live: dict[str, Any]) -> None:
+    """The rate the bridge works out from the controller's counters and
+    clock (Stats.cycle_rate_hz): what the user reads is the feed's 1 kHz.
+    (A derivative of the cycle counter would be over Studio's receive
+    time, the browser's clock as messages are parsed: 0 or 1 ms apart.)"""
     cfgs = _layout()["configById"]
     found = [(pid, p.get("label") or p["value"]) for pid, c in cfgs.items()
              if pid.startswith("Plot!") for p in c["paths"]
-             if p["value"] == f"{bridge.T_CYCLE}.cycle.@derivative"]
-    if not found:
-        pytest.skip("the layout has no cycle-rate plot")
+             if p["value"] == f"{bridge.T_STATS}.cycle_rate_hz"]
+    assert found, "the layout has no cycle-rate plot"
+    recorded = sorted(m["cycle_rate_hz"] for tp, _t, m in mcapio.iter_json(live["mcap"])
+                      if tp == bridge.T_STATS and m.get("cycle_rate_hz") is not None)
     for pid, label in found:
         s = live["page"]["plots"][pid]["series"][label]
-        assert s["finite"] >= 0.9 * s["n"], (pid, s)
-        assert abs(s["median"] - RATE) < 0.1 * RATE, (pid, s)
+        # a point per STATS after the first: 0 while the feed holds its
+        # cycles back, the rate while they flow
+        assert s["n"] >= 3 and s["finite"] == s["n"], (pid, s)
+        # every point is a rate the bridge computed (the same messages went
+        # to the recording), and the feed's 1 kHz is among them: the feed is
+        # paced by the host's clock, so the bound is broad (no speed test)
+        csv = OUT / f"plot-{pid.replace('!', '_')}.csv"
+        shown = [float(r.split(",")[-1]) for r in csv.read_text().splitlines()[1:]
+                 if r.split(",")[-2] == label]
+        assert shown and all(any(abs(v - r) <= 1e-6 * max(1.0, r) for r in recorded)
+                             for v in shown), (shown, recorded)
+        assert 0.5 * RATE < max(shown) < 1.5 * RATE, shown
 
 
 def test_text_panels_show_messages(live: dict[str, Any]) -> None:

@@ -67,8 +67,11 @@ def layout(n_axes: int) -> dict[str, Any]:
                               [_path(f"{ax}[1].feedback.actual_pos", "actual")],
                               xAxisVal="custom",
                               xAxisPath={"value": f"{ax}[0].feedback.actual_pos", "enabled": True})
-    cfg["Plot!rate"] = _plot("cycle rate (cycles/s)", [
-        _path("/servoamp/cycle.cycle.@derivative", "cycles/s")])
+    # the bridge's rate (Stats.cycle_rate_hz, controller time): a derivative
+    # of the cycle counter over receive time would be as good as the
+    # viewer's clock, which is the browser's on a live connection in Studio
+    cfg["Plot!rate"] = _plot("cycle rate (cycles/s of controller time)", [
+        _path("/servoamp/stats.cycle_rate_hz", "cycles/s")])
     cfg["Plot!latency"] = _plot("latency (ns)", [
         _path("/servoamp/cycle.wake_latency_ns", "servod wake-up"),
         _path("/servoamp/cycle.irq_latency_ns", "servo irq"),

@@ -77,6 +77,20 @@ await context.route("**/*", (route) => {
   return route.abort();
 });
 page.on("pageerror", (e) => pageErrors.push(String(e).slice(0, 500)));
+// The protocol's requests the page sends (JSON text frames): a set is done
+// when Studio sent it, not when its table shows the typed text.
+const sentOps = [];
+page.on("websocket", (ws) => {
+  ws.on("framesent", (f) => {
+    if (typeof f.payload !== "string") return;
+    try {
+      const j = JSON.parse(f.payload);
+      sentOps.push({ op: j.op, parameters: j.parameters });
+    } catch {
+      /* not JSON: not a request */
+    }
+  });
+});
 page.on("console", (m) => {
   if (m.type() === "error") consoleErrors.push(m.text().slice(0, 500));
 });
@@ -250,25 +264,43 @@ try {
   });
 
   // -- the Parameters panel: type a value, submit, as a user does ----------------------
+  // Studio lists the parameters again every 15 s, and the answer re-renders
+  // the rows: an edit typed just before is lost (its Submit button goes, or
+  // the click lands on the old row and nothing is sent), while the row still
+  // shows the typed text. So a set counts once the page sent setParameters
+  // with the value; until then, as a user would, type it again.
+  const sentSet = (value, from) => sentOps.slice(from).some((o) => o.op === "setParameters" &&
+    (o.parameters ?? []).some((q) => q.name === opt.param && Number(q.value) === Number(value)));
   const setParam = async (value) => {
     const params = page.locator(panelSel("Parameters!params"));
     const row = params.locator("tr", { hasText: opt.param }).first();
-    const box = row.locator("textarea").first();
-    await box.click();
-    await box.fill(String(value));
-    await row.getByRole("button", { name: "Submit change" }).click();
+    for (let attempt = 1; ; attempt++) {
+      const from = sentOps.length;
+      const box = row.locator("textarea").first();
+      await box.click();
+      await box.fill(String(value));
+      try {
+        await row.getByRole("button", { name: "Submit change" }).click({ timeout: 5_000 });
+      } catch (e) {
+        if (attempt >= 5) throw e;
+      }
+      for (let i = 0; i < 30 && !sentSet(value, from); i++) await page.waitForTimeout(100);
+      if (sentSet(value, from)) return attempt;
+      if (attempt >= 5) throw new Error(`no setParameters for ${opt.param} = ${value} after ${attempt} tries`);
+      log(`the ${opt.param} row re-rendered before its Submit (try ${attempt}): typing it again`);
+    }
   };
   if (opt.good !== undefined) {
     setStage("set good");
     const before = await page.evaluate(readParameters, opt.param);
-    await setParam(opt.good);
+    const tries = await setParam(opt.good);
     const after = await waitFor(`${opt.param} = ${opt.good} in the Parameters panel`, (a) => {
       const panel = document.querySelector('[data-testid="panel-mouseenter-container Parameters!params"]');
       const tr = [...(panel?.querySelectorAll("tr") ?? [])].find((r) => r.innerText.trim().split(/\s/)[0] === a.name);
       const v = tr?.querySelector("textarea")?.value ?? tr?.innerText;
       return { ok: v !== undefined && Number(v) === Number(a.value), value: v };
     }, { name: opt.param, value: opt.good });
-    result.set_good = { before: before.row, shown: after.value };
+    result.set_good = { before: before.row, shown: after.value, tries };
     // the controller's answer comes back through the bridge: wait for Studio's next poll
     // to list the value too (the parameters are listed again every 15 s)
   }

@@ -101,7 +101,7 @@ class ParamChange(_message.Message):
     def __init__(self, cycle: _Optional[int] = ..., id: _Optional[int] = ..., name: _Optional[str] = ..., type: _Optional[str] = ..., value: _Optional[float] = ..., unit: _Optional[str] = ...) -> None: ...
 
 class Stats(_message.Message):
-    __slots__ = ("last_cycle", "pushed", "dropped", "drained", "client_lost", "client_events_lost", "events", "events_dropped", "bytes_sent", "ring_high_water", "ring_capacity", "clients", "final", "counters")
+    __slots__ = ("last_cycle", "pushed", "dropped", "drained", "client_lost", "client_events_lost", "events", "events_dropped", "bytes_sent", "ring_high_water", "ring_capacity", "clients", "final", "counters", "cycle_rate_hz")
     class CountersEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -123,6 +123,7 @@ class Stats(_message.Message):
     CLIENTS_FIELD_NUMBER: _ClassVar[int]
     FINAL_FIELD_NUMBER: _ClassVar[int]
     COUNTERS_FIELD_NUMBER: _ClassVar[int]
+    CYCLE_RATE_HZ_FIELD_NUMBER: _ClassVar[int]
     last_cycle: int
     pushed: int
     dropped: int
@@ -137,7 +138,8 @@ class Stats(_message.Message):
     clients: int
     final: bool
     counters: _containers.ScalarMap[str, int]
-    def __init__(self, last_cycle: _Optional[int] = ..., pushed: _Optional[int] = ..., dropped: _Optional[int] = ..., drained: _Optional[int] = ..., client_lost: _Optional[int] = ..., client_events_lost: _Optional[int] = ..., events: _Optional[int] = ..., events_dropped: _Optional[int] = ..., bytes_sent: _Optional[int] = ..., ring_high_water: _Optional[int] = ..., ring_capacity: _Optional[int] = ..., clients: _Optional[int] = ..., final: _Optional[bool] = ..., counters: _Optional[_Mapping[str, int]] = ...) -> None: ...
+    cycle_rate_hz: float
+    def __init__(self, last_cycle: _Optional[int] = ..., pushed: _Optional[int] = ..., dropped: _Optional[int] = ..., drained: _Optional[int] = ..., client_lost: _Optional[int] = ..., client_events_lost: _Optional[int] = ..., events: _Optional[int] = ..., events_dropped: _Optional[int] = ..., bytes_sent: _Optional[int] = ..., ring_high_water: _Optional[int] = ..., ring_capacity: _Optional[int] = ..., clients: _Optional[int] = ..., final: _Optional[bool] = ..., counters: _Optional[_Mapping[str, int]] = ..., cycle_rate_hz: _Optional[float] = ...) -> None: ...
 
 class Gap(_message.Message):
     __slots__ = ("reason", "source", "from_cycle", "to_cycle", "lost", "detail")
