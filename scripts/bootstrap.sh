@@ -31,7 +31,7 @@ sudo_cmd=""
 
 apt_host=(build-essential gcc make pkg-config python3-venv git
 	gcc-arm-none-eabi libnewlib-arm-none-eabi binutils-arm-none-eabi
-	clang libclang-rt-14-dev spin chromium)
+	clang libclang-rt-14-dev spin chromium openssl util-linux)
 apt_board=(gcc-arm-linux-gnueabihf binutils-arm-linux-gnueabihf
 	device-tree-compiler linux-source-6.1 bc bison flex libssl-dev
 	libelf-dev cpio xz-utils kmod python3-minimal libc6-dev-armhf-cross)

@@ -155,7 +155,7 @@ struct sp_param_desc {
 };
 
 /* Only for code that can use double constants (both sides can: the
- * firmware converts them with libgcc's soft-float helpers at init). */
+ * firmware converts them with its VFP at init). */
 #define SP_X_DESC(id, name, type, unit, min, max, def, flags) \
 	{ id, #name, type, unit, (double)(min), (double)(max), (double)(def), flags },
 #define SP_PARAM_TABLE_INIT { SP_PARAMS(SP_X_DESC) }

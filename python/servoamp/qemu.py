@@ -691,6 +691,19 @@ class QemuMachine:
                 return u
         raise QemuError(f"no UART {which!r} (have {[u.name for u in self.uarts]})")
 
+    def pause(self) -> None:
+        """Stops the guest (QMP ``stop``): guest time stands still, its
+        sockets stay open, until resume()."""
+        if self._qmp is None:
+            raise QemuError("QEMU is not running")
+        self._qmp.execute("stop")
+
+    def resume(self) -> None:
+        """Lets a paused guest run on (QMP ``cont``)."""
+        if self._qmp is None:
+            raise QemuError("QEMU is not running")
+        self._qmp.execute("cont")
+
     def hmp(self, command: str, cpu: int | None = None) -> str:
         """A human-monitor command (e.g. ``xp /4wx 0xffff8000``), on the
         given CPU's context for CPU-specific ones (``info registers``)."""

@@ -14,8 +14,11 @@
  * it, then the axis holds that position; status bits SP_AX_SAFESTOP and
  * SP_AX_STANDSTILL report it. Left only by SP_CMD_RESUME.
  *
- * Arithmetic: single-precision float, soft-float (the firmware is built
- * -mfloat-abi=soft); the cost per cycle is measured by link.c.
+ * Arithmetic: single-precision float on the VFPv3-D16 (the firmware is
+ * built -mfloat-abi=hard; start.S enables the VFP, irq_entry keeps its
+ * state across nested handlers); the cost per cycle is measured by link.c
+ * (scripts/bench.sh cycle: about 1,600 instructions for 4 axes, was 22,600
+ * in soft float).
  */
 #include <stdint.h>
 

@@ -3,7 +3,7 @@
 // would, and reports what the page shows as JSON lines on stdout:
 //
 //   node drive.mjs --page URL --out DIR [--param NAME --good V --bad V]
-//                  [--timeout S] [--min-cycles N] [--chromium PATH]
+//                  [--timeout S] [--min-cycles N] [--chromium PATH] [--name NAME]
 //
 //   {"event":"ready", ...}    Studio connected, every panel of the layout
 //                             mounted, the topics advertised, the parameters
@@ -13,6 +13,8 @@
 //                             CSV"), the topics' counts and rates, Studio's
 //                             problems, then the parameter set in the
 //                             Parameters panel (--good, then --bad)
+//   {"event":"stage", ...}    each stage as it begins (load, layout, connect,
+//                             data, plots, problems, set good, set bad, done)
 //   {"event":"error", ...}    and exit 1 (a screenshot studio-failure.png)
 //
 // Screenshots in DIR: studio-host.png (every panel with data, the topics
@@ -35,6 +37,7 @@ const { values: opt } = parseArgs({
     timeout: { type: "string", default: "120" },
     "min-cycles": { type: "string", default: "1000" },
     chromium: { type: "string", default: "/usr/bin/chromium" },
+    name: { type: "string", default: "host" },
   },
 });
 if (!opt.page || !opt.out) {
@@ -164,6 +167,7 @@ const setStage = (name) => {
   stage = name;
   stageAt[name] = (Date.now() - t0) / 1000;
   log(name);
+  emit({ event: "stage", name });  // the caller may act on it (pause a board's stream)
 };
 try {
   log(`open ${opt.page}`);
@@ -255,7 +259,7 @@ try {
   setStage("problems");
   result.problems_before = await page.evaluate(readProblemsTab);
   result.topics = await page.evaluate(readTopics);
-  await page.screenshot({ path: path.join(opt.out, "studio-host.png"), timeout: 60_000 });
+  await page.screenshot({ path: path.join(opt.out, `studio-${opt.name}.png`), timeout: 60_000 });
   await page.getByRole("tab", { name: /^Problems/ }).click();
   result.problems_before.list = await waitFor("the problems list", () => {
     const none = [...document.querySelectorAll("p, span, div")].some((e) => e.childElementCount === 0 && e.innerText?.trim() === "No problems found");
@@ -334,7 +338,8 @@ try {
     }
     const tab = await page.evaluate(readProblemsTab);
     result.set_bad = { problems: refused.items, shown_after: kept.row.input, reset, problems_tab: tab };
-    await page.screenshot({ path: path.join(opt.out, "studio-param-refused.png"), timeout: 60_000 });
+    const refusedShot = opt.name === "host" ? "studio-param-refused.png" : `studio-${opt.name}-param-refused.png`;
+    await page.screenshot({ path: path.join(opt.out, refusedShot), timeout: 60_000 });
   }
   result.params_final = await page.evaluate(readParameters, opt.param);
   setStage("done");
