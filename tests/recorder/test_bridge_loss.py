@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 import shutil
 import signal
+import struct
 import subprocess
 from pathlib import Path
 
@@ -52,7 +53,9 @@ def _read(path: Path) -> tuple[dict[str, list[bytes]], str | None]:
                     topics[r.id] = r.topic
                 elif isinstance(r, Message):
                     out.setdefault(topics[r.channel_id], []).append(r.data)
-        except (McapError, EOFError, ValueError) as e:
+        except (McapError, EOFError, ValueError, struct.error) as e:
+            # the cut: a record written in part (where depends on the flush
+            # the disk filled at), read up to it
             stopped = f"{type(e).__name__}: {e}"
     return out, stopped
 

@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from conftest import BOARD, CONTRACT, REPO, parse_board_config
+from rpu_common import BOARD, CONTRACT, REPO, parse_board_config
 
 DTS = REPO / "boards" / BOARD / "servo.dts"
 GEN = REPO / "rpu_app" / "scripts" / "gen_board_header.py"

@@ -10,7 +10,7 @@ import pytest
 from elftools.elf.constants import P_FLAGS
 from elftools.elf.elffile import ELFFile
 
-from conftest import CONTRACT
+from rpu_common import CONTRACT, _make
 
 RSC_CARVEOUT, RSC_DEVMEM, RSC_TRACE, RSC_VDEV = 0, 1, 2, 3
 VARIANTS = ["servo.elf", "servo-norsc.elf"]
@@ -158,7 +158,6 @@ def test_variants_differ_only_by_table(rpu_build):
 def test_build_options(tmp_path, toolchain, board_cfg, opts):
     """Every documented make option builds warning-free (-Werror) and keeps
     the images inside the carveout."""
-    from conftest import _make
     b = tmp_path / "b"
     r = _make(b, *opts)
     assert r.returncode == 0, r.stdout + r.stderr

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Iterator
 
 import pytest
-from conftest import CRSH, PRKD, RUN, qemu_ok
+from rpu_common import CRSH, PRKD, RUN, qemu_ok
 from qemu_rpu import GdbRemote, QemuRpu, _symbol as symbol
 from test_rpu_qemu import STATS_RE, entry_of, request_start, request_stop
 

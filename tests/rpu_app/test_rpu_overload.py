@@ -15,7 +15,7 @@ import re
 from pathlib import Path
 
 import pytest
-from conftest import PRKD, RUN, qemu_ok
+from rpu_common import PRKD, RUN, qemu_ok
 from qemu_rpu import QemuRpu, _symbol as symbol
 from test_rpu_qemu import STATS_RE, entry_of, park_range, request_start, request_stop
 

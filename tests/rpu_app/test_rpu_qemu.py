@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from elftools.elf.elffile import ELFFile
 
-from conftest import CRSH, PRKD, RUN, STOP, qemu_ok
+from rpu_common import CRSH, PRKD, RUN, STOP, _make, qemu_ok
 from qemu_rpu import QemuRpu
 
 pytestmark = pytest.mark.skipif(qemu_ok() is not None, reason=qemu_ok() or "")
@@ -268,7 +268,6 @@ def test_svc_stack_overflow_faults_on_guard(rpu_build, board_cfg, tmp_path):
 
 def test_mmu_off_build_runs_and_parks(tmp_path, board_cfg):
     """MMU=0 (caches off) is a supported fallback: boots, cycles, parks."""
-    from conftest import _make
     b = tmp_path / "b"
     r = _make(b, "MMU=0")
     assert r.returncode == 0, r.stdout + r.stderr

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import BOARD, REPO
+from rpu_common import BOARD, REPO
 
 BUILD_PY = REPO / "scripts" / "west_commands" / "build.py"
 IGNORE = shutil.ignore_patterns(".venv", "build", ".git", ".west", "__pycache__", "*.o", "*.d", "output")
