@@ -83,8 +83,8 @@ def net_args(board: qemu.Board, port: int | None) -> tuple[list[str], int | None
     print(f"[emu] network: {net['nic']} (eth0, {net['guest_addr']}), "
           f"host 127.0.0.1:{host_port} -> guest :{net['telemetry_port']}")
     print(f"[emu] live in Foxglove: .venv/bin/servoamp bridge --connect 127.0.0.1:{host_port} "
-          f"--token-file FILE [--mcap run.mcap], then open ws://127.0.0.1:8765 "
-          f"(Open connection > Foxglove WebSocket)")
+          f"--token-file FILE [--mcap run.mcap], then open the ws://127.0.0.1:8765/?token=... "
+          f"URL it prints (Open connection > Foxglove WebSocket)")
     return netboard.nic_args(host_port, int(net["telemetry_port"]), str(net["nic"])), host_port
 
 

@@ -19,15 +19,17 @@ def test_emu_net_forwards_the_telemetry_port(images: qemu.Images) -> None:
     port = netboard.free_port()
     token = f"emu-net-{secrets.token_hex(4)}"
     guest_port = board.data["network"]["telemetry_port"]
-    # the guest answers one connection on the telemetry port, then the
-    # scripted run ends. On the host clock, with a second's pause after the
-    # answer: QEMU's user networking hands the guest's bytes to the host
-    # socket from its main loop, and a board that quits at once (on virtual
-    # time the guest reaches its prompt in no host time) lost them 2 times
-    # in 11 on a loaded host.
+    # the guest answers connections on the telemetry port until one of them
+    # says "ok" back, then the scripted run ends. QEMU's user networking
+    # accepts a host connection before the guest listens and closes it
+    # (nothing read; the host connects again), and the guest's one answer
+    # could go to such a connection: the run ended with the host having
+    # read nothing (CI, on a loaded host). On the host clock, with a
+    # second's pause after the answer: user networking hands the guest's
+    # bytes to the host socket from its main loop.
     cmd = [sys.executable, str(REPO / "scripts" / "west_commands" / "emu.py"),
            "--accel", "tcg,thread=single", "--host-time", "--net", str(port), "--timeout", "90",
-           "-c", f"echo {token} | nc -l -p {guest_port}; sleep 1"]
+           "-c", f"until echo {token} | nc -l -p {guest_port} | grep -q ok; do :; done; sleep 1"]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     got = b""
     try:
@@ -37,8 +39,10 @@ def test_emu_net_forwards_the_telemetry_port(images: qemu.Images) -> None:
                 with socket.create_connection(("127.0.0.1", port), timeout=2) as s:
                     s.settimeout(5)
                     got = b""
-                    while chunk := s.recv(256):
+                    while token.encode() not in got and (chunk := s.recv(256)):
                         got += chunk
+                    if token.encode() in got:
+                        s.sendall(b"ok\n")  # the guest's cue to end the run
             except OSError:
                 pass
             if token.encode() not in got:
