@@ -34,8 +34,11 @@ void cycle_stats_wake(struct cycle_stats *s, const struct cycle_wake *w, uint32_
 	s->last_count = w->count;
 	s->have_count = 1;
 	/* missed interval events: between the events' own times (wake-up
-	 * minus the latency read from the counter), not between wake-ups */
-	if (s->last_event_ns && period_ns) {
+	 * minus the latency read from the counter), not between wake-ups.
+	 * An event time that goes back (a latency read across a counter
+	 * restart: a wake-up more than a period late, a new period) misses
+	 * nothing: the unsigned difference would be ~2^64 / period. */
+	if (s->last_event_ns && period_ns && event > s->last_event_ns) {
 		uint64_t n = (event - s->last_event_ns + period_ns / 2u) / period_ns;
 
 		if (n > 1u)

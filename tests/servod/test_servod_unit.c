@@ -634,6 +634,23 @@ static void test_cycle_bounds(void)
 	w.t_ns += 3000000;
 	cycle_stats_wake(&st, &w, 0);
 	CHECK_EQ(st.wakes, 2);
+	/* an event time that goes back (the latency read across a counter
+	 * restart) misses nothing; the Studio test on the board showed
+	 * servod.missed_irq = 18446744074815, ~2^64 / 1 ms, before */
+	w.t_ns += 1000000;
+	w.lat_ns = 900000;
+	cycle_stats_wake(&st, &w, 1000000u);
+	w.t_ns += 100000;
+	w.lat_ns = 0;	/* event 100 us after the last wake, 1 ms after its event */
+	cycle_stats_wake(&st, &w, 1000000u);
+	w.t_ns += 50000;
+	w.lat_ns = 900000;	/* this event: before the last one */
+	cycle_stats_wake(&st, &w, 1000000u);
+	CHECK_EQ(st.missed_irq, 0);
+	w.t_ns += 3000000;
+	w.lat_ns = 0;	/* then 3 periods on: 2 missed, counted */
+	cycle_stats_wake(&st, &w, 1000000u);
+	CHECK(st.missed_irq >= 1 && st.missed_irq <= 3);
 	free(sd);
 }
 
