@@ -33,6 +33,8 @@ void prog_init(struct prog_runner *pr, const struct prog_opts *o, pthread_mutex_
 	pr->opt = *o;
 	pr->cycle_lock = cycle_lock;
 	pr->prog_fd = -1;
+	pr->on_queues = NULL;	/* telemetry_start sets it, after this */
+	pr->on_queues_user = NULL;
 	/* cannot fail: queue_buf is aligned and sized for PROG_QUEUE_N */
 	if (ring_init_buf(&pr->queue, pr->queue_buf, sizeof(pr->queue_buf), sizeof(struct motion_setpoint),
 			  PROG_QUEUE_N))

@@ -108,7 +108,13 @@ struct prog_runner {
 	char *text;			/* the program, read once: dry run and run use the same text */
 	size_t text_len;
 	int32_t run_start[AMP_MAX_AXES];
+	/* while a program runs, about every PROG_QUEUES_NS: the pipeline's
+	 * queue levels (servod: telemetry QUEUES); NULL: not wanted */
+	void (*on_queues)(void *user, const uint32_t *level, const uint32_t *cap, unsigned n);
+	void *on_queues_user;
 };
+
+#define PROG_QUEUES_NS 100000000ull	/* 10 queue-level samples a second */
 
 /* Before the cycle thread starts. cycle_lock: servod's sd->lock. */
 void prog_init(struct prog_runner *pr, const struct prog_opts *o, pthread_mutex_t *cycle_lock);

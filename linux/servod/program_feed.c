@@ -135,9 +135,18 @@ static int stream_program(struct prog_runner *pr, struct motion *m, const char *
 	size_t off = 0;
 	int ended = 0;
 	uint32_t batches = 0;
+	uint64_t queues_ns = 0;
 
 	for (;;) {
 		uint32_t room;
+
+		if (k->to_queue && pr->on_queues && mono_now_ns() - queues_ns >= PROG_QUEUES_NS) {
+			uint32_t level[MOTION_N_QUEUES], cap[MOTION_N_QUEUES];
+
+			queues_ns = mono_now_ns();
+			motion_queue_levels(m, level, cap);
+			pr->on_queues(pr->on_queues_user, level, cap, MOTION_N_QUEUES);
+		}
 
 		if (atomic_load(&pr->feeder_abort)) {
 			snprintf(msg, msgn, "aborted");

@@ -101,6 +101,22 @@ int telemetry_check_access(struct servod_opts *o)
 	return 0;
 }
 
+/* The program runner's queue levels (its feeder thread) as a QUEUES event:
+ * the layout's queue curves. */
+static void push_queues(void *user, const uint32_t *level, const uint32_t *cap, unsigned n)
+{
+	struct servod *sd = user;
+	struct telem_queue_level q[TELEM_MAX_QUEUES];
+	unsigned k = 0;
+
+	for (unsigned i = 0; i < n && k < TELEM_MAX_QUEUES; i++, k++) {
+		snprintf(q[k].name, sizeof(q[k].name), "%s", motion_queue_name(i));
+		q[k].level = level[i];
+		q[k].capacity = cap[i];
+	}
+	(void)telem_push_queues(&sd->telem, 0, q, k);	/* a full event queue counts the drop */
+}
+
 void telemetry_start(struct servod *sd)
 {
 	struct telem_cfg tc;
@@ -135,6 +151,8 @@ void telemetry_start(struct servod *sd)
 		return;
 	}
 	sd->telem_on = 1;
+	sd->prog.on_queues = push_queues;
+	sd->prog.on_queues_user = sd;
 	logm(sd, "telemetry on %s:%u (%u axes, ring %u cycles, %s)", sd->opt.telem_addr, telem_port(&sd->telem),
 	     tc.n_axes, tc.ring_capacity, tc.token_len ? "token required" : "no token");
 }

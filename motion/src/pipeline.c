@@ -384,6 +384,17 @@ int motion_wait(struct motion *m, uint32_t timeout_ms)
 	return run_ended(m) ? 0 : -1;
 }
 
+void motion_queue_levels(const struct motion *m, uint32_t level[MOTION_N_QUEUES],
+			 uint32_t cap[MOTION_N_QUEUES])
+{
+	level[Q_STREAM] = motion_stream_level(m);
+	cap[Q_STREAM] = m->src.size;
+	for (unsigned q = 1; q < MOTION_N_QUEUES; q++) {
+		level[q] = ring_count(&m->q[q]);
+		cap[q] = m->q[q].cap;
+	}
+}
+
 void motion_get_stats(const struct motion *m, struct motion_stats *st)
 {
 	struct sched_stats ss;

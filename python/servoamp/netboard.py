@@ -79,7 +79,7 @@ class ControllerBoard:
     def __init__(self, board: qemu.Board | None = None, images: qemu.Images | None = None,
                  host_port: int | None = None, accel: str | None = "tcg,thread=single",
                  keep_logs: bool = False, extra_args: Sequence[str] = (),
-                 clock: str | None = None) -> None:
+                 clock: str | None = None, icount: str | None = None) -> None:
         self.board = board or qemu.Board.load("zynq7000_qemu")
         self.images = images
         self.host_port = host_port or free_port()
@@ -87,6 +87,7 @@ class ControllerBoard:
         self.keep_logs = keep_logs
         self.extra_args = list(extra_args)
         self.clock = clock              # None: qemu.default_clock()
+        self.icount = icount            # virtual time: -icount spec instead of the board's
         self.machine: qemu.QemuMachine | None = None
         self.boot_times: qemu.BootTimes | None = None
         self.prompt = str(self.board.data["linux"]["prompt"])
@@ -98,7 +99,7 @@ class ControllerBoard:
             self.images = qemu.prepare_images(self.board)
         self.machine = qemu.QemuMachine(self.board, self.images, accel=self.accel,
                                         keep_logs=self.keep_logs, clock=self.clock,
-                                        extra_args=nic_args(self.host_port) + self.extra_args)
+                                        icount=self.icount, extra_args=nic_args(self.host_port) + self.extra_args)
         self.machine.start()
         try:
             self.boot_times = qemu.boot_to_shell(self.machine, timeout=timeout)

@@ -193,6 +193,11 @@ struct motion_stats {
 	uint64_t sched_ns[MOTION_MAX_WORKERS];
 };
 void motion_get_stats(const struct motion *m, struct motion_stats *st);
+/* The queues' levels now (the stream in bytes, the others in items) and
+ * their capacities, in motion_queue_name() order; from any thread (one
+ * atomic read per queue: a snapshot of each, not one consistent cut). */
+void motion_queue_levels(const struct motion *m, uint32_t level[MOTION_N_QUEUES],
+			 uint32_t cap[MOTION_N_QUEUES]);
 const char *motion_queue_name(unsigned q);
 /* CSV of queue levels over time: t_us,stream,blocks,segments,... */
 int motion_trace_csv(const struct motion *m, FILE *f);
