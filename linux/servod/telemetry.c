@@ -107,14 +107,15 @@ static void push_queues(void *user, const uint32_t *level, const uint32_t *cap, 
 {
 	struct servod *sd = user;
 	struct telem_queue_level q[TELEM_MAX_QUEUES];
-	unsigned k = 0;
 
-	for (unsigned i = 0; i < n && k < TELEM_MAX_QUEUES; i++, k++) {
-		snprintf(q[k].name, sizeof(q[k].name), "%s", motion_queue_name(i));
-		q[k].level = level[i];
-		q[k].capacity = cap[i];
+	if (n > TELEM_MAX_QUEUES)
+		n = TELEM_MAX_QUEUES;
+	for (unsigned i = 0; i < n; i++) {
+		snprintf(q[i].name, sizeof(q[i].name), "%s", motion_queue_name(i));
+		q[i].level = level[i];
+		q[i].capacity = cap[i];
 	}
-	(void)telem_push_queues(&sd->telem, 0, q, k);	/* a full event queue counts the drop */
+	(void)telem_push_queues(&sd->telem, 0, q, n);	/* a full event queue counts the drop */
 }
 
 void telemetry_start(struct servod *sd)

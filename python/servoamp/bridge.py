@@ -33,6 +33,7 @@ import os
 import secrets
 import socket
 import struct
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -202,17 +203,17 @@ class Bridge:
                                  "served on this machine only (use an SSH tunnel for "
                                  "another machine)")
             crt, key, tls = wsfront.new_tls()
+
+            def sdk_server(name: str, writable: bool) -> Any:
+                return foxglove.start_server(
+                    name=name, host="127.0.0.1", port=0, context=self.ctx,
+                    capabilities=[Capability.Parameters] if params else [],
+                    server_listener=_Listener(self, writable) if params else None,
+                    message_backlog_size=message_backlog, tls_cert=crt, tls_key=key)
+
             try:
-                self.server = foxglove.start_server(
-                    name="servoamp", host="127.0.0.1", port=0, context=self.ctx,
-                    capabilities=[Capability.Parameters] if params else [],
-                    server_listener=_Listener(self, writable=True) if params else None,
-                    message_backlog_size=message_backlog, tls_cert=crt, tls_key=key)
-                self.server_ro = foxglove.start_server(
-                    name="servoamp (read-only)", host="127.0.0.1", port=0, context=self.ctx,
-                    capabilities=[Capability.Parameters] if params else [],
-                    server_listener=_Listener(self, writable=False) if params else None,
-                    message_backlog_size=message_backlog, tls_cert=crt, tls_key=key)
+                self.server = sdk_server("servoamp", writable=True)
+                self.server_ro = sdk_server("servoamp (read-only)", writable=False)
                 # a taken port raises here, before any file is opened
                 self.front = wsfront.WsFront(ws_host, ws_port, upstream_rw=self.server.port,
                                              upstream_ro=self.server_ro.port, tls=tls,
@@ -327,8 +328,6 @@ class Bridge:
                 pass
             if not self.keep_live:
                 raise RecordingError(msg) from None
-            import sys
-
             print(f"servoamp bridge: {msg}; the live view goes on", file=sys.stderr, flush=True)
 
     # -- parameters through servod ------------------------------------------------------
@@ -442,7 +441,6 @@ class Bridge:
         nmsg = 0
         t_ns = self.last_t_ns
         for typ, off, ln in frames:
-            self._pending_bytes += ln
             if typ == tw.MSG_CYCLE:
                 if enc is None or ln < csize:
                     raise tw.ProtocolError(f"CYCLE of {ln} bytes, expected {csize}")
@@ -593,6 +591,7 @@ class Bridge:
                         break
                     continue
                 splitter.feed(data)
+                self._pending_bytes += len(data)
                 self._process(splitter.buf, splitter.frames())
                 if self.on_progress is not None:
                     self.on_progress(res)

@@ -128,11 +128,7 @@ def read_head(sock: socket.socket, limit: int = HEAD_MAX) -> tuple[bytes, bytes]
 
 
 def parse_head(raw: bytes) -> Head:
-    try:
-        text = raw.decode("latin-1")
-    except UnicodeDecodeError:  # latin-1 decodes everything; kept for clarity
-        raise HeadError("undecodable head") from None
-    lines = text.split("\r\n")
+    lines = raw.decode("latin-1").split("\r\n")  # latin-1 decodes every byte
     parts = lines[0].split(" ")
     if len(parts) != 3:
         raise HeadError(f"bad start line {lines[0][:80]!r}")

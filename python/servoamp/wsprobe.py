@@ -15,6 +15,8 @@ import socket
 import struct
 import sys
 
+from servoamp.wsfront import HeadError, read_head
+
 
 def upgrade(port: int, target: str = "/", origin: str | None = None,
             protocol: str = "foxglove.sdk.v1", host: str = "127.0.0.1",
@@ -29,18 +31,13 @@ def upgrade(port: int, target: str = "/", origin: str | None = None,
     if origin is not None:
         lines.append(f"Origin: {origin}")
     s.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
-    buf = b""
     try:
-        while b"\r\n\r\n" not in buf:
-            d = s.recv(4096)
-            if not d:
-                break
-            buf += d
-    except OSError:
-        pass
-    head = buf.split(b"\r\n\r\n", 1)[0].decode("latin-1")
+        raw, rest = read_head(s)
+    except HeadError:
+        return 0, "", s
+    head = raw.decode("latin-1")
     status = int(head.split(" ")[1]) if head.startswith("HTTP/") and " " in head else 0
-    return status, buf.decode("latin-1", "replace"), s
+    return status, head + "\r\n\r\n" + rest.decode("latin-1", "replace"), s
 
 
 def text_frame(payload: bytes) -> bytes:

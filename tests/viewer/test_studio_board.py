@@ -20,20 +20,16 @@ read. The screenshots: build/viewer/board/studio-board*.png.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
 import threading
 import time
 from pathlib import Path
 from typing import Any
-from urllib.parse import quote
 
 import pytest
 
 from recorder_helpers import TOP
 from servoamp import bridge, mcapio, netboard, qemu
-from test_studio_live import DRIVE, VIEWER, _serve_tools
+from test_studio_live import run_driver
 
 pytestmark = pytest.mark.board
 
@@ -87,56 +83,35 @@ def board_view(images: qemu.Images, viewer_ready: None,
         stop = threading.Event()
         runner = threading.Thread(target=lambda: b.run(stop=stop), daemon=True)
         runner.start()
-        http = _serve_tools()
-        events: dict[str, dict[str, Any]] = {}
-        err_lines: list[str] = []
-        drv: subprocess.Popen[str] | None = None
-        paused = False
+        machine = cb.machine
+        assert machine is not None
+        paused = [False]
+
+        def on_event(ev: dict[str, Any]) -> None:
+            if ev["event"] == "ready":
+                _hang_recover_and_run(cb)
+            elif ev["event"] == "stage" and ev["name"] == "plots":
+                # Studio takes a live stream in slower than the guest sends
+                # it: the guest waits (QMP stop, guest time stands still)
+                # while the page's plots are read
+                machine.pause()
+                paused[0] = True
+            elif ev["event"] == "stage" and ev["name"] == "set good" and paused[0]:
+                machine.resume()
+                paused[0] = False
+
         try:
             assert b.ws_url is not None
-            page = (f"http://127.0.0.1:{http.server_address[1]}/viewer/index.html"
-                    f"?url={quote(b.ws_url, safe='')}")
-            drv = subprocess.Popen(
-                ["node", str(DRIVE), "--page", page, "--out", str(OUT), "--param", "pos_kp",
-                 "--good", str(GOOD), "--bad", str(BAD), "--timeout", "150",
-                 "--min-cycles", "300", "--name", "board"],
-                cwd=VIEWER, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                env=dict(os.environ, NODE_NO_WARNINGS="1"))
-            so, se = drv.stdout, drv.stderr
-            assert so is not None and se is not None
-            threading.Thread(target=lambda: err_lines.extend(se), daemon=True).start()
-            watchdog = threading.Timer(420, drv.kill)
-            watchdog.start()
-            for line in so:
-                ev = json.loads(line)
-                events[ev["event"]] = ev
-                if ev["event"] == "ready":
-                    _hang_recover_and_run(cb)
-                elif ev["event"] == "stage" and ev["name"] == "plots":
-                    # Studio takes a live stream in slower than the guest sends
-                    # it: the guest waits (QMP stop, guest time stands still)
-                    # while the page's plots are read
-                    assert cb.machine is not None
-                    cb.machine.pause()
-                    paused = True
-                elif ev["event"] == "stage" and ev["name"] == "set good" and paused:
-                    assert cb.machine is not None
-                    cb.machine.resume()
-                    paused = False
-            drv.wait(timeout=60)
-            watchdog.cancel()
+            events, err_lines = run_driver(b.ws_url, OUT, good=GOOD, bad=BAD, timeout_s=150,
+                                           min_cycles=300,
+                                           watchdog_s=420, on_event=on_event, name="board")
             out["kp_after"] = cb.ampctl("param get pos_kp").strip().splitlines()[-1]
             out["stats"] = cb.stats()
         finally:
-            if paused and cb.machine is not None:
-                cb.machine.resume()
+            if paused[0]:
+                machine.resume()
             stop.set()
-            if drv is not None and drv.poll() is None:
-                drv.kill()
-                drv.communicate()
             runner.join(timeout=30)
-            http.shutdown()
-            http.server_close()
             b.close()
     if "result" not in events:
         pytest.fail(f"the driver failed: {events.get('error')}\n{''.join(err_lines)[-4000:]}")

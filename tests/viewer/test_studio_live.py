@@ -29,7 +29,7 @@ import subprocess
 import threading
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 from urllib.parse import quote
 
 import pytest
@@ -86,6 +86,45 @@ def _second_client(port: int, stop: threading.Event) -> threading.Thread:
     return t
 
 
+def run_driver(ws_url: str, out: Path, *, good: float, bad: float, timeout_s: int,
+               min_cycles: int, watchdog_s: float, on_event: Callable[[dict[str, Any]], None],
+               name: str = "host") -> tuple[dict[str, dict[str, Any]], list[str]]:
+    """tools/viewer/drive.mjs on the page (tools/ served on 127.0.0.1) for
+    ws_url: its events by name, on_event called with each as it comes, and
+    its stderr lines. The whole driver is killed after watchdog_s."""
+    http = _serve_tools()
+    events: dict[str, dict[str, Any]] = {}
+    err_lines: list[str] = []
+    drv: subprocess.Popen[str] | None = None
+    try:
+        page = (f"http://127.0.0.1:{http.server_address[1]}/viewer/index.html"
+                f"?url={quote(ws_url, safe='')}")
+        drv = subprocess.Popen(
+            ["node", str(DRIVE), "--page", page, "--out", str(out), "--param", "pos_kp",
+             "--good", str(good), "--bad", str(bad), "--timeout", str(timeout_s),
+             "--min-cycles", str(min_cycles), "--name", name],
+            cwd=VIEWER, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=dict(os.environ, NODE_NO_WARNINGS="1"))
+        so, se = drv.stdout, drv.stderr
+        assert so is not None and se is not None
+        threading.Thread(target=lambda: err_lines.extend(se), daemon=True).start()
+        watchdog = threading.Timer(watchdog_s, drv.kill)
+        watchdog.start()
+        for line in so:
+            ev = json.loads(line)
+            events[ev["event"]] = ev
+            on_event(ev)
+        drv.wait(timeout=60)
+        watchdog.cancel()
+    finally:
+        if drv is not None and drv.poll() is None:
+            drv.kill()
+            drv.communicate()
+        http.shutdown()
+        http.server_close()
+    return events, err_lines
+
+
 @pytest.fixture(scope="module")
 def live(feed_bin: Path, viewer_ready: None, tmp_path_factory: pytest.TempPathFactory
          ) -> dict[str, Any]:
@@ -105,44 +144,23 @@ def live(feed_bin: Path, viewer_ready: None, tmp_path_factory: pytest.TempPathFa
     runner = threading.Thread(target=lambda: run_res.append(b.run(duration=300, stop=stop)),
                               daemon=True)
     runner.start()
-    http = _serve_tools()
-    events: dict[str, dict[str, Any]] = {}
-    err_lines: list[str] = []
-    drv: subprocess.Popen[str] | None = None
+
+    def on_event(ev: dict[str, Any]) -> None:
+        if ev["event"] == "ready":
+            # the page is connected and subscribed: let the cycles flow
+            _second_client(feed.port, stop)
+
     try:
         assert b.ws_url is not None
-        page = (f"http://127.0.0.1:{http.server_address[1]}/viewer/index.html"
-                f"?url={quote(b.ws_url, safe='')}")
-        drv = subprocess.Popen(
-            ["node", str(DRIVE), "--page", page, "--out", str(OUT), "--param", "pos_kp",
-             "--good", str(GOOD), "--bad", str(BAD), "--timeout", "90",
-             "--min-cycles", str(CYCLES)],
-            cwd=VIEWER, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            env=dict(os.environ, NODE_NO_WARNINGS="1"))
-        out, err = drv.stdout, drv.stderr
-        assert out is not None and err is not None
-        threading.Thread(target=lambda: err_lines.extend(err), daemon=True).start()
-        watchdog = threading.Timer(DRIVER_TIMEOUT_S, drv.kill)
-        watchdog.start()
-        for line in out:
-            ev = json.loads(line)
-            events[ev["event"]] = ev
-            if ev["event"] == "ready":
-                # the page is connected and subscribed: let the cycles flow
-                _second_client(feed.port, stop)
-        drv.wait(timeout=60)
-        watchdog.cancel()
+        events, err_lines = run_driver(b.ws_url, OUT, good=GOOD, bad=BAD, timeout_s=90,
+                                       min_cycles=CYCLES,
+                                       watchdog_s=DRIVER_TIMEOUT_S, on_event=on_event)
         stop.set()
         runner.join(timeout=30)
         feed.proc.send_signal(signal.SIGTERM)
         fres = feed.result()
     finally:
         stop.set()
-        if drv is not None and drv.poll() is None:
-            drv.kill()
-            drv.communicate()
-        http.shutdown()
-        http.server_close()
         b.close()
         feed.kill()
     if "result" not in events:  # pytest.fail: no AssertionError for the xfail below to take

@@ -146,6 +146,21 @@ function valueOf(pv, name) {
   return p ? p.value : undefined;
 }
 
+// the parameter's value as the server lists it after the sets
+async function listAfter() {
+  out.step = "list after";
+  const ev = waitFor((e) => e.kind === "params" && e.pv.id === "list2");
+  client.getParameters([pname], "list2");
+  out.list_after = valueOf((await ev).pv, pname);
+}
+
+function done() {
+  out.step = "done";
+  out.ok = true;
+  client.close();
+  finish(0);
+}
+
 (async () => {
   out.step = "cycles";
   await waitFor((e) => e.kind === "cycles_done");
@@ -165,14 +180,8 @@ function valueOf(pv, name) {
       ev = waitFor((e) => e.kind === "params" && e.pv.id === "set1");
       client.setParameters([{ name: pname, value: good, type: "float64" }], "set1");
       out.set_readonly = { before, status: (await refusal).s.message, reply: valueOf((await ev).pv, pname) };
-      out.step = "list after";
-      ev = waitFor((e) => e.kind === "params" && e.pv.id === "list2");
-      client.getParameters([pname], "list2");
-      out.list_after = valueOf((await ev).pv, pname);
-      out.step = "done";
-      out.ok = true;
-      client.close();
-      finish(0);
+      await listAfter();
+      done();
       return;
     }
 
@@ -190,14 +199,7 @@ function valueOf(pv, name) {
     ev = waitFor((e) => e.kind === "params" && e.pv.id === "set2");
     client.setParameters([{ name: pname, value: bad, type: "float64" }], "set2");
     out.set_bad = { status: (await refusal).s.message, reply: valueOf((await ev).pv, pname) };
-
-    out.step = "list after";
-    ev = waitFor((e) => e.kind === "params" && e.pv.id === "list2");
-    client.getParameters([pname], "list2");
-    out.list_after = valueOf((await ev).pv, pname);
+    await listAfter();
   }
-  out.step = "done";
-  out.ok = true;
-  client.close();
-  finish(0);
+  done();
 })();
