@@ -235,6 +235,37 @@ struct sp_status {
 #define SP_AX_STANDSTILL (1u << 2)	/* |velocity| below 1 inc per cycle */
 #define SP_AX_CUR_LIMIT  (1u << 3)	/* current limited in this cycle */
 #define SP_AX_FE_LIMIT   (1u << 4)	/* following error over fe_max */
+/*
+ * Bits 8-11: the axis's drive (issue 22). 0: the firmware's internal motor
+ * model; otherwise a CANopen CiA 402 drive and its state as the master last
+ * saw it (SP_DRIVE_*). Bits 16-31: the drive's last error code (EMCY, CiA
+ * 301/402: 0x8611 following error, 0x2310 over-current, ...), 0 if none,
+ * 0x8130 when its heartbeat went silent. Existing readers that test bits 0-4
+ * are unaffected.
+ */
+#define SP_AX_DRIVE_SHIFT 8
+#define SP_AX_DRIVE_MASK  (0xfu << SP_AX_DRIVE_SHIFT)
+#define SP_AX_ERROR_SHIFT 16
+#define SP_AX_ERROR_MASK  (0xffffu << SP_AX_ERROR_SHIFT)
+#define SP_AX_DRIVE(sw)   (((sw) & SP_AX_DRIVE_MASK) >> SP_AX_DRIVE_SHIFT)
+#define SP_AX_ERROR(sw)   (((sw) & SP_AX_ERROR_MASK) >> SP_AX_ERROR_SHIFT)
+#define SP_AX_MAKE_DRIVE(state, error) \
+	((((uint32_t)(state) << SP_AX_DRIVE_SHIFT) & SP_AX_DRIVE_MASK) | \
+	 (((uint32_t)(error) << SP_AX_ERROR_SHIFT) & SP_AX_ERROR_MASK))
+
+/* SP_AX_DRIVE() values */
+#define SP_DRIVE_INTERNAL          0u	/* the firmware's own motor model */
+#define SP_DRIVE_OFFLINE           1u	/* no boot-up / heartbeat lost */
+#define SP_DRIVE_CONFIGURING       2u	/* NMT/SDO configuration by the master */
+#define SP_DRIVE_NOT_READY         3u	/* CiA 402 "Not ready to switch on" */
+#define SP_DRIVE_SWITCH_ON_DISABLED 4u
+#define SP_DRIVE_READY             5u	/* "Ready to switch on" */
+#define SP_DRIVE_SWITCHED_ON       6u
+#define SP_DRIVE_OPERATION_ENABLED 7u
+#define SP_DRIVE_QUICK_STOP        8u	/* "Quick stop active" */
+#define SP_DRIVE_FAULT_REACTION    9u	/* "Fault reaction active" */
+#define SP_DRIVE_FAULT             10u
+#define SP_DRIVE_STATES            11u
 
 /* servo line fault word while SAFESTOP (amp_servo_set_state) */
 #define SP_FAULT_NONE        0u

@@ -52,8 +52,10 @@ static void exchange(struct servod *sd, struct amp_cmd_axis *cmd, const struct c
 	/* the axes the feedback covers (amp_lib bounds its count) */
 	nfb = sd->amp.fb.n_axes < n ? sd->amp.fb.n_axes : n;
 	if (rc == AMP_OK && fresh)
-		for (uint32_t i = 0; i < nfb; i++)
+		for (uint32_t i = 0; i < nfb; i++) {
 			st->act_pos[i] = sd->amp.fb.axis[i].actual_pos;
+			st->ax_status[i] = sd->amp.fb.axis[i].status_word;
+		}
 	telemetry_cycle(sd, w, rc, &rx, cmd, n);
 	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
 	cycle_stats_heartbeat(st, pi.heartbeat, w->t_ns);

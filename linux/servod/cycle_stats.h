@@ -52,6 +52,8 @@ struct cycle_stats {
 	uint32_t stall_us;
 	/* the last commanded positions and the last actual ones (fresh feedback) */
 	int32_t cmd_pos[AMP_MAX_AXES], act_pos[AMP_MAX_AXES];
+	/* the last status word of each axis (fresh feedback): its drive state and error code */
+	uint32_t ax_status[AMP_MAX_AXES];
 
 	/* trackers of the cycle thread (not counters) */
 	uint32_t last_count;	/* UIO event count of the last wake-up */

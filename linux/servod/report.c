@@ -29,10 +29,31 @@ static const char *fault_name(uint32_t f)
 	}
 }
 
+/* SP_AX_DRIVE() of a status word, as `ampctl status` prints it */
+static const char *drive_name(uint32_t d)
+{
+	static const char *const names[SP_DRIVE_STATES] = {
+		[SP_DRIVE_INTERNAL] = "internal",
+		[SP_DRIVE_OFFLINE] = "offline",
+		[SP_DRIVE_CONFIGURING] = "configuring",
+		[SP_DRIVE_NOT_READY] = "not-ready-to-switch-on",
+		[SP_DRIVE_SWITCH_ON_DISABLED] = "switch-on-disabled",
+		[SP_DRIVE_READY] = "ready-to-switch-on",
+		[SP_DRIVE_SWITCHED_ON] = "switched-on",
+		[SP_DRIVE_OPERATION_ENABLED] = "operation-enabled",
+		[SP_DRIVE_QUICK_STOP] = "quick-stop-active",
+		[SP_DRIVE_FAULT_REACTION] = "fault-reaction-active",
+		[SP_DRIVE_FAULT] = "fault",
+	};
+
+	return d < SP_DRIVE_STATES ? names[d] : "?";
+}
+
 static int req_status(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
 {
 	struct amp_peer_info pi = { 0 };
 	int32_t cmd[AMP_MAX_AXES], act[AMP_MAX_AXES];
+	uint32_t ax_status[AMP_MAX_AXES], axes;
 	struct sp_status s;
 	uint64_t restores, recoveries;
 	int peer, rc, open;
@@ -46,6 +67,7 @@ static int req_status(struct servod *sd, struct out *o, int argc, char **argv, c
 	recoveries = sd->stats.recoveries;
 	memcpy(cmd, sd->stats.cmd_pos, sizeof(cmd));
 	memcpy(act, sd->stats.act_pos, sizeof(act));
+	memcpy(ax_status, sd->stats.ax_status, sizeof(ax_status));
 	pthread_mutex_unlock(&sd->lock);
 	put(o, "remoteproc=%s\n", rproc_state(&sd->rproc));
 	put(o, "session=%s epoch=%u\n", open ? "open" : session_latched(&sd->session) ? "fault" : "closed",
@@ -59,6 +81,11 @@ static int req_status(struct servod *sd, struct out *o, int argc, char **argv, c
 	    sd->session.restored_attach, (unsigned long long)restores, (unsigned long long)recoveries,
 	    session_recovering(&sd->session), sd->session.params_resend);
 	supervisor_format(sd, o);
+	/* each axis's drive: the internal model or a CiA 402 drive's state and error code */
+	axes = sd->pset[SP_P_axes] < AMP_MAX_AXES ? sd->pset[SP_P_axes] : AMP_MAX_AXES;
+	for (uint32_t i = 0; i < axes; i++)
+		put(o, "axis%u.drive=%s axis%u.error=0x%04x\n", i, drive_name(SP_AX_DRIVE(ax_status[i])), i,
+		    SP_AX_ERROR(ax_status[i]));
 	prog_format_status(&sd->prog, o, cmd, act);
 	if (session_latched(&sd->session)) {
 		snprintf(msg, n, "fault latched (%s): the firmware is stopped; `ampctl fault reset` restarts it",
