@@ -1,0 +1,339 @@
+# SPDX-License-Identifier: MIT
+"""Client of canlink, the lockstep link between an emulated CAN bus in our
+QEMU and host processes (docs/canlink.md), and the exact bus time of a
+classic CAN frame.
+
+Every message both ways is one 32-byte little-endian record::
+
+    type u8 | flags u8 | dlc u8 | rsvd u8 | can_id u32 | t_ns u64 | data 8s | seq u32 | rsvd2 u32
+
+A :class:`Link` connects to the Unix socket QEMU listens on, says HELLO
+(``active`` for a client that answers frames and holds the guest while it
+does), and then reads FRAME records; an active client answers a frame with
+its own FRAMEs and ends it with DONE(seq). Every record read is checked
+(:func:`unpack`): an unknown type, a dlc over 8, an identifier over its range
+or nonzero reserved fields raise :class:`ProtocolError`.
+
+:func:`frame_bits` is the length on the wire of a classic CAN data or remote
+frame, with ISO 11898-1 bit stuffing, as QEMU's backend models it.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import struct
+import threading
+import time
+from dataclasses import dataclass
+
+HELLO = 1
+FRAME = 2
+DONE = 3
+BYE = 4
+TYPES = (HELLO, FRAME, DONE, BYE)
+
+FLAG_EFF = 0x01
+FLAG_RTR = 0x02
+FLAG_INFO = 0x80
+FRAME_FLAGS = FLAG_EFF | FLAG_RTR | FLAG_INFO
+HELLO_ACTIVE = 0x01
+
+SFF_MAX = 0x7FF
+EFF_MAX = 0x1FFFFFFF
+
+RECORD = struct.Struct("<BBBBIQ8sII")
+assert RECORD.size == 32
+RECORD_SIZE = RECORD.size
+
+
+class ProtocolError(Exception):
+    """A record that breaks docs/canlink.md, or a peer that went away in the
+    middle of one."""
+
+
+@dataclass(frozen=True)
+class Record:
+    """One canlink message. ``data`` holds exactly ``dlc`` bytes for a data
+    FRAME (none for a remote frame); for HELLO it is the name."""
+
+    type: int
+    flags: int = 0
+    dlc: int = 0
+    can_id: int = 0
+    t_ns: int = 0
+    data: bytes = b""
+    seq: int = 0
+
+    @property
+    def eff(self) -> bool:
+        return bool(self.flags & FLAG_EFF)
+
+    @property
+    def rtr(self) -> bool:
+        return bool(self.flags & FLAG_RTR)
+
+    @property
+    def info(self) -> bool:
+        return bool(self.flags & FLAG_INFO)
+
+    @property
+    def active(self) -> bool:
+        """HELLO from a client: it answers frames (holds the guest)."""
+        return self.type == HELLO and bool(self.flags & HELLO_ACTIVE)
+
+
+def _check(rec: Record) -> None:
+    if rec.type not in TYPES:
+        raise ProtocolError(f"unknown record type {rec.type}")
+    if not 0 <= rec.flags <= 0xFF:
+        raise ProtocolError(f"flags {rec.flags} out of range")
+    if not 0 <= rec.t_ns < 1 << 64:
+        raise ProtocolError(f"t_ns {rec.t_ns} out of range")
+    if not 0 <= rec.seq < 1 << 32:
+        raise ProtocolError(f"seq {rec.seq} out of range")
+    if rec.type == FRAME:
+        if rec.flags & ~FRAME_FLAGS:
+            raise ProtocolError(f"unknown FRAME flags {rec.flags:#x}")
+        if not 0 <= rec.dlc <= 8:
+            raise ProtocolError(f"dlc {rec.dlc} over 8")
+        limit = EFF_MAX if rec.eff else SFF_MAX
+        if not 0 <= rec.can_id <= limit:
+            raise ProtocolError(f"can_id {rec.can_id:#x} over {limit:#x}")
+        want = 0 if rec.rtr else rec.dlc
+        if len(rec.data) != want:
+            raise ProtocolError(f"{len(rec.data)} data bytes for dlc {rec.dlc}"
+                                f"{' (remote frame)' if rec.rtr else ''}")
+    else:
+        if rec.dlc != 0 and rec.type != HELLO:
+            raise ProtocolError(f"dlc {rec.dlc} in a non-FRAME record")
+        if not 0 <= rec.can_id < 1 << 32:
+            raise ProtocolError(f"can_id {rec.can_id} out of range")
+        if len(rec.data) > 8:
+            raise ProtocolError("more than 8 data bytes")
+
+
+def pack(rec: Record) -> bytes:
+    """The 32 bytes of ``rec``; :class:`ProtocolError` if it is not valid."""
+    _check(rec)
+    return RECORD.pack(rec.type, rec.flags, rec.dlc, 0, rec.can_id, rec.t_ns,
+                       rec.data.ljust(8, b"\0"), rec.seq, 0)
+
+
+def unpack(buf: bytes) -> Record:
+    """The record in 32 bytes, bounds-checked: :class:`ProtocolError` for a
+    wrong length, an unknown type, a dlc over 8, an identifier over its
+    range, nonzero reserved fields, or payload bytes past the dlc."""
+    if len(buf) != RECORD_SIZE:
+        raise ProtocolError(f"record of {len(buf)} bytes, not {RECORD_SIZE}")
+    typ, flags, dlc, rsvd, can_id, t_ns, data, seq, rsvd2 = RECORD.unpack(buf)
+    if rsvd != 0 or rsvd2 != 0:
+        raise ProtocolError("nonzero reserved field")
+    if typ == FRAME:
+        if dlc > 8:
+            raise ProtocolError(f"dlc {dlc} over 8")
+        used = 0 if flags & FLAG_RTR else dlc
+        if any(data[used:]):
+            raise ProtocolError("payload bytes past the dlc")
+        payload = bytes(data[:used])
+    elif typ == HELLO:
+        payload = bytes(data).rstrip(b"\0")
+    else:
+        payload = b""
+    rec = Record(typ, flags, dlc, can_id, t_ns, payload, seq)
+    _check(rec)
+    return rec
+
+
+# --- bus time ---------------------------------------------------------------
+
+CRC15_POLY = 0x4599
+# CRC delimiter, ACK slot, ACK delimiter, 7 bits EOF, 3 bits intermission
+TRAILER_BITS = 13
+
+
+def _bits(value: int, width: int) -> list[int]:
+    return [(value >> (width - 1 - i)) & 1 for i in range(width)]
+
+
+def _crc15(bits: list[int]) -> int:
+    crc = 0
+    for b in bits:
+        nxt = b ^ (crc >> 14)
+        crc = (crc << 1) & 0x7FFF
+        if nxt:
+            crc ^= CRC15_POLY
+    return crc
+
+
+def frame_bitstream(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) -> list[int]:
+    """The unstuffed bits from SOF to the last CRC bit (0 dominant)."""
+    if not 0 <= dlc <= 8:
+        raise ValueError(f"dlc {dlc} over 8")
+    if not 0 <= can_id <= (EFF_MAX if eff else SFF_MAX):
+        raise ValueError(f"can_id {can_id:#x} out of range")
+    payload = b"" if rtr else bytes(data)
+    if len(payload) != (0 if rtr else dlc):
+        raise ValueError(f"{len(payload)} data bytes for dlc {dlc}")
+    bits = [0]                                           # SOF
+    if eff:
+        bits += _bits(can_id >> 18, 11) + [1, 1]         # base id, SRR, IDE
+        bits += _bits(can_id & 0x3FFFF, 18) + [int(rtr), 0, 0]  # ext id, RTR, r1, r0
+    else:
+        bits += _bits(can_id, 11) + [int(rtr), 0, 0]     # id, RTR, IDE, r0
+    bits += _bits(dlc, 4)
+    for byte in payload:
+        bits += _bits(byte, 8)
+    return bits + _bits(_crc15(bits), 15)
+
+
+def stuff_count(bits: list[int]) -> int:
+    """Stuff bits ISO 11898-1 inserts into ``bits``: one after every five
+    equal bits, the stuff bit itself starting the next run."""
+    count = 0
+    run = 0
+    last = -1
+    for b in bits:
+        if b == last:
+            run += 1
+        else:
+            last, run = b, 1
+        if run == 5:
+            count += 1
+            last, run = 1 - b, 1
+    return count
+
+
+def frame_bits(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) -> int:
+    """Exact length in bits of a classic CAN data or remote frame on the
+    wire: SOF to the last CRC bit with its stuff bits, plus the 13
+    unstuffed bits from the CRC delimiter to the end of intermission."""
+    bits = frame_bitstream(can_id, eff, rtr, dlc, data)
+    return len(bits) + stuff_count(bits) + TRAILER_BITS
+
+
+# --- the client ---------------------------------------------------------------
+
+
+class Link:
+    """A connection to QEMU's canlink backend.
+
+    ``connect`` sends HELLO and waits for QEMU's (bit rate, guest time).
+    :meth:`recv` returns the next FRAME or BYE record (``None`` on timeout;
+    :class:`ProtocolError` when QEMU closed the socket). :meth:`send_frame`
+    and :meth:`done` may be called from another thread than :meth:`recv`.
+    """
+
+    def __init__(self, sock: socket.socket, active: bool) -> None:
+        self.sock = sock
+        self.active = active
+        self.bitrate = 0
+        self.t_hello_ns = 0
+        self.closed = False
+        self._buf = bytearray()
+        self._pending: list[Record] = []
+        self._wlock = threading.Lock()
+
+    @classmethod
+    def connect(cls, path: str, active: bool = False, name: str = "",
+                timeout: float = 10.0) -> Link:
+        """Connect to ``path``, say HELLO, and read QEMU's HELLO (at most
+        ``timeout`` seconds). FRAMEs that arrive before it are kept for
+        :meth:`recv`."""
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            sock.settimeout(timeout)
+            sock.connect(path)
+            sock.settimeout(None)
+            link = cls(sock, active)
+            link._send(Record(HELLO, HELLO_ACTIVE if active else 0,
+                              data=name.encode("ascii", "replace")[:8]))
+            deadline = time.monotonic() + timeout
+            while True:
+                rec = link._read(max(0.0, deadline - time.monotonic()))
+                if rec is None:
+                    raise ProtocolError(f"{path}: no HELLO from QEMU in {timeout} s")
+                if rec.type == HELLO:
+                    link.bitrate = rec.can_id
+                    link.t_hello_ns = rec.t_ns
+                    if link.bitrate <= 0:
+                        raise ProtocolError("QEMU's HELLO has bit rate 0")
+                    return link
+                if rec.type == BYE:
+                    raise ProtocolError(f"{path}: BYE before HELLO")
+                if rec.type == FRAME:
+                    link._pending.append(rec)
+        except BaseException:
+            sock.close()
+            raise
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+    def _send(self, rec: Record) -> None:
+        raw = pack(rec)
+        with self._wlock:
+            self.sock.sendall(raw)
+
+    def _read(self, timeout: float | None) -> Record | None:
+        """One record; None when ``timeout`` passed first."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while len(self._buf) < RECORD_SIZE:
+            if deadline is not None:
+                left = deadline - time.monotonic()
+                if left <= 0 and not select.select([self.sock], [], [], 0)[0]:
+                    return None
+                if left > 0 and not select.select([self.sock], [], [], left)[0]:
+                    return None
+            chunk = self.sock.recv(4096)
+            if not chunk:
+                self.closed = True
+                if self._buf:
+                    raise ProtocolError(f"connection closed inside a record ({len(self._buf)} bytes)")
+                raise ProtocolError("connection closed by QEMU")
+            self._buf += chunk
+        raw = bytes(self._buf[:RECORD_SIZE])
+        del self._buf[:RECORD_SIZE]
+        return unpack(raw)
+
+    def recv(self, timeout: float | None = None) -> Record | None:
+        """The next FRAME or BYE from QEMU (a DONE or HELLO is a protocol
+        error); None if ``timeout`` seconds passed first."""
+        if self._pending:
+            return self._pending.pop(0)
+        rec = self._read(timeout)
+        if rec is not None and rec.type not in (FRAME, BYE):
+            raise ProtocolError(f"unexpected record type {rec.type} from QEMU")
+        if rec is not None and rec.type == BYE:
+            self.closed = True
+        return rec
+
+    def send_frame(self, can_id: int, data: bytes = b"", eff: bool = False,
+                   rtr: bool = False, dlc: int | None = None, t_ns: int = 0) -> None:
+        """Put a frame on the bus: as the answer to the frame being handled
+        (active client, before its DONE) or as a frame outside an exchange.
+        ``t_ns`` is the earliest guest time it may start (0: none)."""
+        n = len(data) if dlc is None else dlc
+        self._send(Record(FRAME, (FLAG_EFF if eff else 0) | (FLAG_RTR if rtr else 0),
+                          n, can_id, t_ns, b"" if rtr else bytes(data), 0))
+
+    def done(self, seq: int) -> None:
+        """End the exchange of frame ``seq``."""
+        self._send(Record(DONE, seq=seq))
+
+    def close(self) -> None:
+        """Say BYE (if the socket still works) and close."""
+        if self.sock.fileno() >= 0:
+            try:
+                if not self.closed:
+                    self._send(Record(BYE))
+            except OSError:
+                pass
+            self.sock.close()
+        self.closed = True
+
+    def __enter__(self) -> Link:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
