@@ -30,7 +30,7 @@ import socket
 import subprocess
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -347,16 +347,55 @@ def clock_args(board: Board, clock: str | None = None, icount: str | None = None
     return ["-icount", icount or str(c["icount"]), "-rtc", str(c["rtc"])]
 
 
+CAN_BUSES = (0, 1)                    # the Zynq-7000's CAN0 and CAN1
+CAN_LINK_OPTS = ("bitrate", "timeout-ms", "max-timeouts")
+
+
+def can_args(can_links: Mapping[int, str | Path] | None,
+             can_link_opts: Mapping[str, int] | None = None) -> tuple[str, list[str]]:
+    """The CAN buses linked to host processes by canlink (docs/canlink.md):
+    ``can_links`` maps a controller (0: CAN0, 1: CAN1) to the Unix socket
+    path its bus's ``can-host-lockstep`` backend listens on;
+    ``can_link_opts`` sets the backend's ``bitrate``, ``timeout-ms`` and
+    ``max-timeouts`` (the backend's defaults otherwise). Returns the machine
+    properties to append to ``-M`` (``,canbus0=canbus0``) and the
+    ``-object`` arguments."""
+    if not can_links:
+        return "", []
+    opts = dict(can_link_opts or {})
+    for k, v in opts.items():
+        if k not in CAN_LINK_OPTS:
+            raise QemuError(f"can-host-lockstep option {k!r}: expected one of {', '.join(CAN_LINK_OPTS)}")
+        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+            raise QemuError(f"can-host-lockstep option {k}={v!r}: expected a positive integer")
+    machine = ""
+    objects: list[str] = []
+    for bus, path in sorted(can_links.items()):
+        if bus not in CAN_BUSES:
+            raise QemuError(f"CAN bus {bus!r}: the board has CAN0 and CAN1 (0, 1)")
+        p = str(path)
+        if not p or "," in p or len(os.fsencode(p)) >= 108:
+            raise QemuError(f"canlink socket path {p!r}: empty, with a comma, or too long for a Unix socket")
+        machine += f",canbus{bus}=canbus{bus}"
+        link = f"can-host-lockstep,id=canlink{bus},canbus=canbus{bus},path={p}"
+        link += "".join(f",{k}={v}" for k, v in opts.items())
+        objects += ["-object", f"can-bus,id=canbus{bus}", "-object", link]
+    return machine, objects
+
+
 def machine_args(board: Board, serials: Sequence[str], accel: str | None = None, clock: str | None = None,
-                 icount: str | None = None) -> list[str]:
+                 icount: str | None = None, can_links: Mapping[int, str | Path] | None = None,
+                 can_link_opts: Mapping[str, int] | None = None) -> list[str]:
     """The machine of ``board`` without any image: machine, CPUs, memory,
-    accelerator, time base (:func:`clock_args`) and one ``-serial`` value
-    per UART of ``serials``, in board order. Every run of the board starts
+    accelerator, time base (:func:`clock_args`), one ``-serial`` value
+    per UART of ``serials``, in board order, and the CAN buses linked to
+    host processes (:func:`can_args`). Every run of the board starts
     from these: the Linux boot (:func:`qemu_args`) and the firmware alone
     (tests/rpu_app, its loaders in :attr:`QemuMachine.extra_args`)."""
     q = board.qemu
+    can_machine, can_objects = can_args(can_links, can_link_opts)
     args = [
-        "-M", str(q["machine"]), "-smp", str(q["smp"]), "-m", str(q["memory"]),
+        "-M", str(q["machine"]) + can_machine, "-smp", str(q["smp"]), "-m", str(q["memory"]),
         "-display", "none", "-nodefaults",
     ]
     timebase = clock_args(board, clock, icount)
@@ -367,19 +406,22 @@ def machine_args(board: Board, serials: Sequence[str], accel: str | None = None,
     args += timebase
     for s in serials:
         args += ["-serial", s]
-    return args
+    return args + can_objects
 
 
 def qemu_args(board: Board, images: Images, serials: Sequence[str], accel: str | None = None,
-              clock: str | None = None, icount: str | None = None) -> list[str]:
+              clock: str | None = None, icount: str | None = None,
+              can_links: Mapping[int, str | Path] | None = None,
+              can_link_opts: Mapping[str, int] | None = None) -> list[str]:
     """The QEMU arguments (without the binary) for a boot of ``board``.
 
     ``serials``: one ``-serial`` value per UART, in board order; ``clock``
-    and ``icount``: see :func:`clock_args`.
+    and ``icount``: see :func:`clock_args`; ``can_links`` and
+    ``can_link_opts``: see :func:`can_args`.
     """
     q = board.qemu
     stub = board.addr("load", "boot_stub")
-    args = machine_args(board, serials, accel, clock, icount)
+    args = machine_args(board, serials, accel, clock, icount, can_links, can_link_opts)
     timebase = clock_args(board, clock, icount)
     if timebase and images.stub_icount is None:
         raise QemuError("virtual time needs the boot stub without wfe (prepare_images builds it)")
@@ -619,6 +661,8 @@ class QemuMachine:
     keep_logs: bool = False
     clock: str | None = None          # "virtual" (default_clock()) or "host": see clock_args()
     icount: str | None = None         # -icount spec instead of the board's
+    can_links: Mapping[int, Path] | None = None   # CAN bus (0, 1) -> canlink socket: see can_args()
+    can_link_opts: Mapping[str, int] | None = None
     uarts: list[Uart] = field(default_factory=list)
     _proc: subprocess.Popen[bytes] | None = None
     _qmp: Qmp | None = None
@@ -653,9 +697,11 @@ class QemuMachine:
             ]
             serials.append(f"chardev:uart{i}")
         if self.images is not None:
-            args = chardevs + qemu_args(self.board, self.images, serials, self.accel, self.clock, self.icount)
+            args = chardevs + qemu_args(self.board, self.images, serials, self.accel, self.clock, self.icount,
+                                        self.can_links, self.can_link_opts)
         else:
-            args = chardevs + machine_args(self.board, serials, self.accel, self.clock, self.icount)
+            args = chardevs + machine_args(self.board, serials, self.accel, self.clock, self.icount,
+                                           self.can_links, self.can_link_opts)
         args += ["-qmp", f"unix:{qmp_path},server=on,wait=off"]
         args += list(self.extra_args)
         cmd = [binary] + args
@@ -845,14 +891,18 @@ def run_shell(console: Uart, command: str, prompt: str, timeout: float = 20.0) -
 
 
 def interactive(board: Board, images: Images, accel: str | None = None, uart1_log: Path | None = None,
-                extra_args: Sequence[str] = (), clock: str | None = None, icount: str | None = None) -> int:
+                extra_args: Sequence[str] = (), clock: str | None = None, icount: str | None = None,
+                can_links: Mapping[int, str | Path] | None = None,
+                can_link_opts: Mapping[str, int] | None = None) -> int:
     """Boot with UART0 (and the QEMU monitor: Ctrl-A c) on this terminal and
-    UART1 in a log file; return QEMU's exit code."""
+    UART1 in a log file; return QEMU's exit code. ``can_links``: see
+    :func:`can_args`."""
     binary = check_qemu(board)
     uart1_log = uart1_log or (REPO / "build" / "qemu" / "uart1.log")
     uart1_log.parent.mkdir(parents=True, exist_ok=True)
     serials = ["mon:stdio", f"file:{uart1_log}"]
-    cmd = [binary] + qemu_args(board, images, serials, accel, clock, icount) + list(extra_args)
+    cmd = [binary] + qemu_args(board, images, serials, accel, clock, icount, can_links,
+                               can_link_opts) + list(extra_args)
     _log("UART0 (Linux console) on this terminal; Ctrl-A x quits, Ctrl-A c is the monitor")
     _log(f"UART1 (servo core) in {uart1_log}")
     return subprocess.call(cmd)
