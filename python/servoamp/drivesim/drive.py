@@ -1,0 +1,494 @@
+# SPDX-License-Identifier: MIT
+"""One simulated CiA 402 drive: CANopen slave (NMT, SDO server, SYNC
+consumer, PDOs, heartbeat producer, EMCY), the 402 state machine in cyclic
+synchronous position mode, and a motor-and-load model.
+
+Deterministic: the drive has no clock of its own. Every call of
+:meth:`Drive.on_frame` carries the guest time of the frame (its end on the
+modelled bus); heartbeats, the model, timeouts and injected faults all run
+on those times. The object dictionary and the SDO server are canopen's
+(LocalNode from the EDS), with their host-timer services (the heartbeat
+thread) left out.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import canopen
+from canopen.objectdictionary import ODVariable
+from canopen.sdo.exceptions import SdoAbortedError
+
+from servoamp.drivesim import cia402
+from servoamp.drivesim.cia402 import State
+from servoamp.drivesim.model import Motor
+
+log = logging.getLogger("servoamp.drivesim")
+
+EDS = Path(__file__).with_name("servoamp_csp_drive.eds")
+
+MODE_CSP = 8
+SUPPORTED_MODES = (0, MODE_CSP)
+
+# EMCY error codes (CiA 301 / 402)
+ERR_RESET = 0x0000
+ERR_OVER_CURRENT = 0x2310          # continuous over-current, device output side
+ERR_FOLLOWING = 0x8611             # position control: following error
+ERR_PDO_LENGTH = 0x8210            # PDO not processed: length error
+
+ERRREG_GENERIC = 0x01
+ERRREG_CURRENT = 0x02
+ERRREG_PROFILE = 0x20
+
+
+class Nmt(enum.IntEnum):
+    """NMT states as the heartbeat reports them."""
+    INITIALISING = 0x00
+    STOPPED = 0x04
+    OPERATIONAL = 0x05
+    PRE_OPERATIONAL = 0x7F
+
+
+class FaultKind(enum.Enum):
+    FOLLOWING_ERROR = "following-error"
+    OVER_CURRENT = "over-current"
+    OFF_BUS = "off-bus"
+
+
+FAULT_ALIASES = {
+    "following-error": FaultKind.FOLLOWING_ERROR, "fe": FaultKind.FOLLOWING_ERROR,
+    "jam": FaultKind.FOLLOWING_ERROR,
+    "over-current": FaultKind.OVER_CURRENT, "overcurrent": FaultKind.OVER_CURRENT,
+    "oc": FaultKind.OVER_CURRENT,
+    "off-bus": FaultKind.OFF_BUS, "off": FaultKind.OFF_BUS, "drop": FaultKind.OFF_BUS,
+}
+
+
+@dataclass(frozen=True)
+class Injection:
+    """A fault injected into drive ``node`` at guest time ``t_ns``."""
+    node: int
+    kind: FaultKind
+    t_ns: int
+
+    @classmethod
+    def parse(cls, text: str) -> Injection:
+        """``NODE:KIND@T_S``, e.g. ``2:following-error@0.5``."""
+        try:
+            node_s, rest = text.split(":", 1)
+            kind_s, t_s = rest.split("@", 1)
+            node = int(node_s, 0)
+            t = float(t_s)
+        except ValueError:
+            raise ValueError(f"fault {text!r}: want NODE:KIND@T_S") from None
+        kind = FAULT_ALIASES.get(kind_s.strip().lower())
+        if kind is None:
+            raise ValueError(f"fault {text!r}: kind is one of "
+                             + ", ".join(k.value for k in FaultKind))
+        if not 1 <= node <= 127 or not t >= 0:
+            raise ValueError(f"fault {text!r}: node 1..127, time >= 0")
+        return cls(node, kind, round(t * 1e9))
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A frame the drive puts on the bus; ``t_ns`` the earliest guest time
+    it may start (0: as soon as possible)."""
+    can_id: int
+    data: bytes
+    t_ns: int = 0
+
+
+class _Outbox(canopen.Network):
+    """canopen's Network as the SDO server's sender: it keeps the frames."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.frames: list[Frame] = []
+
+    def send_message(self, can_id: int, data: bytes | bytearray, remote: bool = False) -> None:
+        self.frames.append(Frame(can_id, bytes(data)))
+
+
+def _int(od: ODVariable, data: bytes) -> int:
+    value = od.decode_raw(data)
+    if not isinstance(value, int):
+        raise SdoAbortedError(0x06070010)      # data type does not match
+    return value
+
+
+def _i32(x: float) -> int:
+    return max(-(1 << 31), min((1 << 31) - 1, int(round(x))))
+
+
+def _i16(x: float) -> int:
+    return max(-(1 << 15), min((1 << 15) - 1, int(round(x))))
+
+
+@dataclass(frozen=True)
+class _Pdo:
+    cob_id: int
+    trans_type: int
+    mapping: tuple[tuple[int, int, int], ...]   # (index, subindex, bits)
+
+    @property
+    def length(self) -> int:
+        return sum(bits for _, _, bits in self.mapping) // 8
+
+
+class Drive:
+    """A CiA 402 drive with CANopen node id ``node_id``."""
+
+    def __init__(self, node_id: int, eds: Path | str = EDS,
+                 faults: tuple[Injection, ...] | list[Injection] = ()) -> None:
+        if not 1 <= node_id <= 127:
+            raise ValueError(f"node id {node_id} not in 1..127")
+        self.node_id = node_id
+        self.eds = str(eds)
+        self.injections = sorted((f for f in faults if f.node == node_id), key=lambda f: f.t_ns)
+        self.motor = Motor()
+        self.t_ns = 0
+        self.nmt = Nmt.INITIALISING
+        self.off_bus = False
+        self._outbox = _Outbox()
+        self._emcy_pending: list[tuple[int, int]] = []
+        self.node = self._new_node()
+        self._reset_application_state()
+
+    # --- object dictionary ------------------------------------------------
+
+    def _new_node(self) -> canopen.LocalNode:
+        od = canopen.import_od(self.eds, self.node_id)
+        node = canopen.LocalNode(self.node_id, od)
+        # canopen's NMT slave starts a host-timer heartbeat on writes of
+        # 0x1017: the heartbeat here runs on guest time instead.
+        node._write_callbacks.remove(node.nmt.on_write)
+        node.add_read_callback(self._on_read)  # type: ignore[no-untyped-call]
+        node.add_write_callback(self._on_write)  # type: ignore[no-untyped-call]
+        self._outbox = _Outbox()
+        node.associate_network(self._outbox)
+        return node
+
+    def _reset_application_state(self) -> None:
+        self.state = State.NOT_READY
+        self.controlword = 0
+        self.mode = 0
+        self.error_code = 0
+        self.error_register = 0
+        self.demand = self.motor.pos
+        self.demand_prev = self.motor.pos
+        self.hold = self.motor.pos
+        self.fe_time_s = 0.0
+        self.last_sync_ns: int | None = None
+        self.rpdo_latched: dict[int, bytes] = {}
+        self.sync_count = 0
+        self.hb_next_ns: int | None = None
+        self._pdo_cache: tuple[list[_Pdo], list[_Pdo]] | None = None
+        self._load_model_parameters()
+
+    def _load_model_parameters(self) -> None:
+        self.motor.bandwidth_hz = float(self.read(0x2000, 1))
+        self.motor.damping = self.read(0x2000, 2) / 1000.0
+        self.motor.accel_rated = float(self.read(0x2000, 3))
+        self.motor.max_current_pm = float(self.read(0x6073, 0))
+
+    def _var(self, index: int, subindex: int) -> ODVariable:
+        obj = self.node.object_dictionary[index]
+        if isinstance(obj, ODVariable):
+            return obj
+        var = obj[subindex]
+        assert isinstance(var, ODVariable)
+        return var
+
+    def read(self, index: int, subindex: int = 0) -> Any:
+        """The value of an object as the SDO server would give it."""
+        return self._var(index, subindex).decode_raw(self.node.get_data(index, subindex))
+
+    def write(self, index: int, subindex: int, value: Any) -> None:
+        """Write an object as an SDO download would (callbacks included)."""
+        self.node.set_data(index, subindex, self._var(index, subindex).encode_raw(value))
+
+    def statusword(self) -> int:
+        sw = cia402.STATE_BITS[self.state] | cia402.SW_REMOTE
+        if self.state in (State.READY_TO_SWITCH_ON, State.SWITCHED_ON) or cia402.powered(self.state):
+            sw |= cia402.SW_VOLTAGE_ENABLED
+        if self.state == State.OPERATION_ENABLED and self.mode == MODE_CSP:
+            sw |= cia402.SW_CSP_FOLLOWING
+            if self.fe_time_s > 0:
+                sw |= cia402.SW_FOLLOWING_ERROR
+            if abs(self.demand - self.motor.pos) < 1.0 and abs(self.motor.vel) < 1.0:
+                sw |= cia402.SW_TARGET_REACHED
+        return sw
+
+    def _on_read(self, index: int, subindex: int, od: ODVariable, **_: Any) -> int | None:
+        if index == 0x6041:
+            return self.statusword()
+        if index == 0x6061:
+            return self.mode
+        if index == 0x6064:
+            return _i32(self.motor.pos)
+        if index == 0x6062:
+            return _i32(self.demand)
+        if index == 0x606C:
+            return _i32(self.motor.vel)
+        if index == 0x6078:
+            return _i16(self.motor.current_pm if cia402.powered(self.state) else 0.0)
+        if index == 0x60F4:
+            return _i32(self.following_error())
+        if index == 0x603F:
+            return self.error_code
+        if index == 0x1001:
+            return self.error_register
+        return None
+
+    def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes, **_: Any) -> None:
+        if index == 0x6060:
+            mode = _int(od, data)
+            if mode not in SUPPORTED_MODES:
+                raise SdoAbortedError(0x06090030)      # value range exceeded
+            self.mode = mode
+        elif index == 0x6040:
+            self._apply_controlword(_int(od, data))
+        elif index == 0x1017:
+            period = _int(od, data)
+            self.hb_next_ns = self.t_ns + period * 1_000_000 if period else None
+        elif 0x1400 <= index <= 0x1BFF or index == 0x1005:
+            self._pdo_cache = None
+        elif index == 0x2000 or index == 0x6073:
+            value = _int(od, data)
+            if index == 0x6073:
+                self.motor.max_current_pm = float(value)
+            elif subindex == 1:
+                self.motor.bandwidth_hz = float(value)
+            elif subindex == 2:
+                self.motor.damping = value / 1000.0
+            elif subindex == 3:
+                self.motor.accel_rated = float(value)
+
+    def following_error(self) -> float:
+        if self.state == State.OPERATION_ENABLED and self.mode == MODE_CSP:
+            return self.demand - self.motor.pos
+        return 0.0
+
+    # --- PDO configuration -------------------------------------------------
+
+    def _pdos(self) -> tuple[list[_Pdo], list[_Pdo]]:
+        if self._pdo_cache is None:
+            self._pdo_cache = (self._pdo_list(0x1400, 0x1600), self._pdo_list(0x1800, 0x1A00))
+        return self._pdo_cache
+
+    def _pdo_list(self, comm: int, mapping: int) -> list[_Pdo]:
+        od = self.node.object_dictionary
+        pdos = []
+        for i in range(512):
+            if comm + i not in od or mapping + i not in od:
+                if i >= 4:
+                    break
+                continue
+            cob = self.read(comm + i, 1)
+            if cob & 0x80000000:
+                continue        # not valid
+            entries = []
+            for sub in range(1, self.read(mapping + i, 0) + 1):
+                m = self.read(mapping + i, sub)
+                entries.append((m >> 16, (m >> 8) & 0xFF, m & 0xFF))
+            pdo = _Pdo(cob & 0x7FF, self.read(comm + i, 2), tuple(entries))
+            if pdo.length <= 8 and all(bits % 8 == 0 for _, _, bits in entries):
+                pdos.append(pdo)
+        return pdos
+
+    # --- state machine -------------------------------------------------------
+
+    def _set_state(self, state: State) -> None:
+        if state != self.state:
+            log.info("node %d: %s -> %s at %.6f s", self.node_id, cia402.NAMES[self.state],
+                     cia402.NAMES[state], self.t_ns / 1e9)
+            if state == State.QUICK_STOP_ACTIVE or state == State.FAULT_REACTION_ACTIVE:
+                self.hold = self.motor.pos
+            if state == State.OPERATION_ENABLED:
+                self.fe_time_s = 0.0
+            self.state = state
+
+    def _apply_controlword(self, cw: int) -> None:
+        prev, self.controlword = self.controlword, cw
+        new = cia402.transition(self.state, cw, prev)
+        if self.state == State.FAULT and new != State.FAULT:
+            self._emcy_pending.append((ERR_RESET, 0))
+            self.error_code = 0
+            self.error_register = 0
+        self._set_state(new)
+
+    def _trip(self, code: int, register: int) -> None:
+        if self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            return
+        log.info("node %d: fault %#06x at %.6f s", self.node_id, code, self.t_ns / 1e9)
+        self.error_code = code
+        self.error_register = ERRREG_GENERIC | register
+        self._set_state(State.FAULT_REACTION_ACTIVE)
+        self._emcy_pending.append((code, self.error_register))
+
+    # --- the bus -------------------------------------------------------------
+
+    def boot(self, t_ns: int) -> list[Frame]:
+        """Power on (or the end of an NMT reset) at guest time ``t_ns``: the
+        boot-up message, then Pre-operational and Switch on disabled."""
+        self.t_ns = max(self.t_ns, t_ns)
+        self.nmt = Nmt.PRE_OPERATIONAL
+        self._set_state(State.SWITCH_ON_DISABLED)
+        period = self.read(0x1017)
+        self.hb_next_ns = self.t_ns + period * 1_000_000 if period else None
+        return [] if self.off_bus else [Frame(0x700 + self.node_id, b"\x00")]
+
+    def on_frame(self, can_id: int, data: bytes, t_ns: int, rtr: bool = False,
+                 eff: bool = False) -> list[Frame]:
+        """Handle one frame on the bus at guest time ``t_ns``; the frames the
+        drive answers with."""
+        self._emcy_pending = []
+        self._advance(t_ns)
+        if self.off_bus:
+            return []
+        answers = self._dispatch(can_id, data) if not eff and not rtr else []
+        if self.state == State.FAULT_REACTION_ACTIVE and self.last_sync_ns is None:
+            self._set_state(State.FAULT)           # no SYNC to run the reaction on
+        out: list[Frame] = []
+        if self.nmt != Nmt.STOPPED:                # EMCY first: the lower COB-ID wins
+            for code, reg in self._emcy_pending:
+                out.append(Frame(0x80 + self.node_id, struct.pack("<HB5x", code, reg)))
+        self._emcy_pending = []
+        out += answers
+        if self.hb_next_ns is not None and self.t_ns >= self.hb_next_ns:
+            out.append(Frame(0x700 + self.node_id, bytes([int(self.nmt)])))
+            period = self.read(0x1017) * 1_000_000
+            while period and self.hb_next_ns <= self.t_ns:
+                self.hb_next_ns += period
+        return out
+
+    def _advance(self, t_ns: int) -> None:
+        self.t_ns = max(self.t_ns, t_ns)
+        while self.injections and self.injections[0].t_ns <= self.t_ns:
+            inj = self.injections[0]
+            if inj.kind == FaultKind.OFF_BUS:
+                log.info("node %d: drops off the bus at %.6f s", self.node_id, self.t_ns / 1e9)
+                self.off_bus = True
+            elif inj.kind == FaultKind.FOLLOWING_ERROR:
+                log.info("node %d: load jams at %.6f s", self.node_id, self.t_ns / 1e9)
+                self.motor.jammed = True
+            elif inj.kind == FaultKind.OVER_CURRENT:
+                if not cia402.powered(self.state):
+                    break       # trips once the power stage is on
+                self._trip(ERR_OVER_CURRENT, ERRREG_CURRENT)
+            self.injections.pop(0)
+
+    def _dispatch(self, can_id: int, data: bytes) -> list[Frame]:
+        if can_id == 0x000:
+            return self._on_nmt(data)
+        if self.nmt == Nmt.STOPPED:
+            return []
+        sync_id = self.read(0x1005) & 0x7FF
+        if can_id == sync_id:
+            return self._on_sync() if self.nmt == Nmt.OPERATIONAL else []
+        if can_id == 0x600 + self.node_id:
+            if len(data) != 8:
+                return []       # CiA 301: SDO requests are 8 bytes
+            self._outbox.frames = []
+            self.node.sdo.on_request(can_id, bytearray(data), self.t_ns / 1e9)  # type: ignore[no-untyped-call]
+            return self._outbox.frames
+        if self.nmt == Nmt.OPERATIONAL:
+            for pdo in self._pdos()[0]:
+                if can_id == pdo.cob_id:
+                    if len(data) < pdo.length:
+                        self._emcy_pending.append((ERR_PDO_LENGTH, ERRREG_GENERIC))
+                    elif pdo.trans_type >= 254:
+                        self._apply_rpdo(pdo, data)
+                    else:
+                        self.rpdo_latched[pdo.cob_id] = bytes(data)
+        return []
+
+    def _on_nmt(self, data: bytes) -> list[Frame]:
+        if len(data) != 2 or data[1] not in (0, self.node_id):
+            return []
+        cs = data[0]
+        if cs == 0x01:
+            self.nmt = Nmt.OPERATIONAL
+        elif cs == 0x02:
+            self.nmt = Nmt.STOPPED
+        elif cs == 0x80:
+            self.nmt = Nmt.PRE_OPERATIONAL
+        elif cs == 0x81:                      # reset node: the whole OD
+            self.node = self._new_node()
+            self._reset_application_state()
+            return self.boot(self.t_ns)
+        elif cs == 0x82:                      # reset communication: 0x1000-0x1FFF
+            for index in [i for i in self.node.data_store if 0x1000 <= i <= 0x1FFF]:
+                del self.node.data_store[index]
+            self._pdo_cache = None
+            self.rpdo_latched = {}
+            return self.boot(self.t_ns)
+        return []
+
+    def _apply_rpdo(self, pdo: _Pdo, data: bytes) -> None:
+        offset = 0
+        for index, subindex, bits in pdo.mapping:
+            raw = data[offset: offset + bits // 8]
+            offset += bits // 8
+            try:
+                self.node.set_data(index, subindex, raw)
+            except SdoAbortedError as exc:
+                log.info("node %d: RPDO write %04x:%02x refused (%s)", self.node_id, index,
+                         subindex, exc)
+
+    def _on_sync(self) -> list[Frame]:
+        t = self.t_ns
+        if self.last_sync_ns is None:
+            dt = self.read(0x1006) / 1e6
+        else:
+            dt = (t - self.last_sync_ns) / 1e9
+        self.last_sync_ns = t
+        # 1. the interval that ends here, on the setpoint latched at the last SYNC
+        if self.state == State.OPERATION_ENABLED and self.mode == MODE_CSP:
+            self.motor.step(self.demand_prev, self.demand, dt, True)
+        elif cia402.powered(self.state):
+            self.motor.step(self.hold, self.hold, dt, True)
+        else:
+            self.motor.step(0.0, 0.0, dt, False)
+        self._check_following_error(dt)
+        if self.state == State.FAULT_REACTION_ACTIVE:
+            self._set_state(State.FAULT)
+        elif (self.state == State.QUICK_STOP_ACTIVE and abs(self.motor.vel) < 1.0
+              and self.read(0x605A) in (1, 2, 3, 4)):
+            self._set_state(State.SWITCH_ON_DISABLED)
+        # 2. latch the RPDOs received since: controlword, target
+        rpdos = {p.cob_id: p for p in self._pdos()[0]}
+        for cob_id, data in sorted(self.rpdo_latched.items()):
+            if cob_id in rpdos:
+                self._apply_rpdo(rpdos[cob_id], data)
+        self.rpdo_latched = {}
+        if self.state == State.OPERATION_ENABLED and self.mode == MODE_CSP:
+            self.demand_prev, self.demand = self.demand, float(self.read(0x607A))
+        else:
+            self.demand_prev = self.demand = self.motor.pos
+        # 3. the TPDOs
+        self.sync_count += 1
+        out = []
+        for pdo in self._pdos()[1]:
+            if 1 <= pdo.trans_type <= 240 and self.sync_count % pdo.trans_type == 0:
+                payload = b"".join(self.node.get_data(i, s)[: bits // 8] for i, s, bits in pdo.mapping)
+                out.append(Frame(pdo.cob_id, payload))
+        return out
+
+    def _check_following_error(self, dt: float) -> None:
+        if self.state != State.OPERATION_ENABLED or self.mode != MODE_CSP:
+            self.fe_time_s = 0.0
+            return
+        window = self.read(0x6065)
+        if window == 0xFFFFFFFF or abs(self.following_error()) <= window:
+            self.fe_time_s = 0.0
+            return
+        self.fe_time_s += dt
+        if self.fe_time_s * 1000.0 >= self.read(0x6066):
+            self._trip(ERR_FOLLOWING, ERRREG_PROFILE)
