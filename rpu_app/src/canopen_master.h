@@ -1,0 +1,188 @@
+/* SPDX-License-Identifier: MIT */
+#ifndef RPU_CANOPEN_MASTER_H
+#define RPU_CANOPEN_MASTER_H
+
+#include <stdint.h>
+
+/*
+ * canopen_master.c - a small CANopen master for CiA 402 drives in cyclic
+ * synchronous position mode (CSP), one instance per CAN bus.
+ *
+ * Transport-free: frames come in through co_master_rx() and go out through
+ * the send callback given at init, so the logic runs unchanged on the host
+ * (tests/rpu_app/test_canopen_master.c) and in the firmware (axis_can.c,
+ * over canps.c). Never waits: every call does a bounded amount of work
+ * and returns; timeouts are counted in cycles.
+ *
+ * Per node, from co_master_start():
+ *   NMT reset communication -> wait boot-up (0x700+node, byte 0 = 0)
+ *   -> SDO configuration, one expedited request outstanding per node:
+ *        write 0x6060 = 8 (CSP), read back 0x6061 = 8,
+ *        check TPDO1 mapping 0x1A00 = {0x60410010, 0x60640020}
+ *        (statusword + position actual) and RPDO1 mapping 0x1600 =
+ *        {0x60400010, 0x607A0020} (controlword + target position),
+ *        both PDOs synchronous (0x1800:02 = 0x1400:02 = 1),
+ *        heartbeat producer 0x1017 = hb_producer_ms
+ *   -> NMT start -> operational: TPDO1 (0x180+node) read every cycle,
+ *      RPDO1 (0x200+node) sent every cycle before the SYNC (0x080).
+ * The CiA 402 enable sequence (shutdown -> switch on -> enable operation,
+ * fault reset on a new enable request) runs on the statusword each cycle.
+ * Heartbeat consumer: a node silent for more than hb_consumer_ms (once its
+ * first heartbeat is seen, or from NMT start) is an axis fault with code
+ * CO_ERR_HEARTBEAT. EMCY (0x80+node) with a non-zero code is an axis fault
+ * carrying the drive's error code. Faults are latched until the next rising
+ * edge of the axis' enable request.
+ *
+ * Everything received is bounds-checked: the DLC (0..8, and the length
+ * each protocol needs), the node id (1..127, and one of ours), the SDO
+ * command specifier, index, subindex and size.
+ */
+
+#define CO_MAX_NODES 8u		/* nodes per bus (master) */
+
+/* One classic CAN frame (standard 11-bit identifiers only). */
+struct co_frame {
+	uint32_t id;		/* 11-bit COB-ID */
+	uint8_t dlc;		/* 0..8 */
+	uint8_t rtr;
+	uint8_t data[8];
+};
+
+/* Returns 0 when the frame was queued, non-zero when the TX path is full. */
+typedef int (*co_send_fn)(void *ctx, const struct co_frame *f);
+
+/* Node (axis) progress through the start-up. */
+enum co_node_phase {
+	CO_PH_IDLE = 0,		/* not started */
+	CO_PH_RESET,		/* NMT reset communication to send */
+	CO_PH_BOOT_WAIT,	/* waiting for the boot-up message */
+	CO_PH_CONFIG,		/* SDO configuration */
+	CO_PH_START,		/* NMT start to send */
+	CO_PH_OPERATIONAL,	/* PDOs every cycle */
+	CO_PH_FAILED,		/* configuration refused: never operational */
+};
+
+/* CiA 402 drive states, decoded from the statusword (0x6041). */
+enum co_402_state {
+	CO402_UNKNOWN = 0,	/* no statusword yet */
+	CO402_NOT_READY,	/* not ready to switch on */
+	CO402_SWITCH_ON_DISABLED,
+	CO402_READY_TO_SWITCH_ON,
+	CO402_SWITCHED_ON,
+	CO402_OPERATION_ENABLED,
+	CO402_QUICK_STOP_ACTIVE,
+	CO402_FAULT_REACTION_ACTIVE,
+	CO402_FAULT,
+};
+
+/* Controlword commands (CiA 402). */
+#define CO_CW_DISABLE_VOLTAGE 0x0000u
+#define CO_CW_SHUTDOWN 0x0006u
+#define CO_CW_SWITCH_ON 0x0007u
+#define CO_CW_ENABLE_OPERATION 0x000Fu
+#define CO_CW_FAULT_RESET 0x0080u
+
+/* Axis fault codes raised by the master itself (CiA 301 EMCY classes). */
+#define CO_ERR_HEARTBEAT 0x8130u	/* life guard / heartbeat error */
+#define CO_ERR_BUS_OFF 0x8140u		/* recovered from bus off */
+#define CO_ERR_BOOT_TIMEOUT 0xFF01u	/* no boot-up after every NMT reset retry */
+#define CO_ERR_CONFIG 0xFF02u		/* SDO configuration refused / mapping wrong */
+#define CO_ERR_RESTARTED 0xFF03u	/* boot-up while operational: the node restarted */
+
+struct co_config {
+	uint32_t period_us;		/* cycle period (timeouts are counted in cycles) */
+	uint16_t hb_producer_ms;	/* written to each node's 0x1017 */
+	uint16_t hb_consumer_ms;	/* node silent longer than this: axis fault */
+	uint16_t sdo_timeout_ms;	/* one SDO request */
+	uint16_t boot_timeout_ms;	/* boot-up after an NMT reset */
+	uint8_t boot_retries;		/* NMT resets before CO_ERR_BOOT_TIMEOUT */
+	uint8_t sdo_retries;		/* per request, on timeout */
+};
+
+struct co_node {
+	uint8_t node_id;	/* 1..127 */
+	uint8_t phase;		/* enum co_node_phase */
+	uint8_t state402;	/* enum co_402_state */
+	uint8_t nmt_state;	/* last heartbeat state (0 boot-up, 4, 5, 127), 0xFF none */
+	uint8_t step;		/* configuration step */
+	uint8_t sdo_busy;	/* a request is outstanding */
+	uint8_t tries;		/* NMT resets / SDO tries of the current step */
+	uint8_t enable_req;	/* the axis' enable request (co_master_set) */
+	uint8_t enable_prev;	/* last cycle's, for the rising edge */
+	uint8_t fault_reset;	/* cycles of fault-reset bit to send */
+	uint8_t hb_armed;	/* heartbeat consumer running */
+	uint8_t tpdo_seen;	/* TPDO1 received since the last SYNC */
+	uint8_t fault;		/* latched axis fault */
+	uint8_t pos_valid;	/* pos_actual holds a value from the drive */
+	uint16_t statusword;	/* 0x6041 from the last TPDO1 */
+	uint16_t controlword;	/* 0x6040 sent in the last RPDO1 */
+	uint16_t error_code;	/* the latched fault's code (EMCY or CO_ERR_*) */
+	uint16_t emcy_last;	/* last EMCY code received (0: none) */
+	int32_t pos_actual;	/* 0x6064 from the last TPDO1 */
+	int32_t target;		/* the axis' target (co_master_set) */
+	int32_t target_sent;	/* 0x607A sent in the last RPDO1 */
+	uint32_t deadline;	/* cycle at which the boot/SDO wait times out */
+	uint32_t hb_last;	/* cycle of the last heartbeat (or NMT start) */
+	uint32_t sdo_abort;	/* last SDO abort code received */
+	uint32_t tpdo_count;	/* TPDO1s received */
+};
+
+/* The master's counters: one struct, read as a whole (co_master_stats). */
+struct co_stats {
+	uint32_t cycles;		/* co_master_cycle calls */
+	uint32_t sync_sent;
+	uint32_t sync_missed;		/* SYNC not sent: TX path full */
+	uint32_t rpdo_sent;
+	uint32_t rpdo_missed;		/* RPDO not sent: TX path full */
+	uint32_t tpdo_rx;
+	uint32_t pdo_missing;		/* operational nodes whose TPDO1 did not come in a cycle */
+	uint32_t pdo_missing_last;	/* of the last cycle */
+	uint32_t pdo_missing_max;	/* in one cycle */
+	uint32_t emcy;			/* EMCY frames with a non-zero code */
+	uint32_t hb_rx;
+	uint32_t hb_timeouts;
+	uint32_t bootups;
+	uint32_t nmt_sent;
+	uint32_t sdo_req, sdo_ok, sdo_abort, sdo_timeout, sdo_bad;
+	uint32_t rx_frames;		/* frames given to co_master_rx */
+	uint32_t rx_ignored;		/* not for us (other COB-IDs, other nodes) */
+	uint32_t rx_bad;		/* malformed: DLC too short / out of range, RTR */
+	uint32_t tx_busy;		/* any frame refused by the TX path */
+	uint32_t bus_off;		/* bus-off events reported (co_master_bus_off) */
+	uint32_t faults;		/* axis faults raised */
+	uint32_t nodes_operational;	/* nodes now in CO_PH_OPERATIONAL */
+};
+
+struct co_master {
+	co_send_fn send;
+	void *ctx;
+	struct co_config cfg;
+	uint32_t cycle;
+	uint32_t hb_consumer_cycles, sdo_timeout_cycles, boot_timeout_cycles;
+	uint32_t n_nodes;
+	struct co_node node[CO_MAX_NODES];
+	uint8_t index_of[128];	/* node id -> node[] index, 0xFF: not ours */
+	struct co_stats st;
+};
+
+/* 0, or -1 for a node id out of 1..127, a duplicate, or too many nodes. */
+int co_master_init(struct co_master *m, co_send_fn send, void *ctx, const struct co_config *cfg,
+		   const uint8_t *node_ids, uint32_t n_nodes);
+/* Begin the start-up of every node (NMT reset on the next cycle). */
+void co_master_start(struct co_master *m);
+/* One received frame (any COB-ID; what is not ours is counted and dropped). */
+void co_master_rx(struct co_master *m, const struct co_frame *f);
+/* One cycle: timeouts, start-up steps, RPDOs then SYNC. */
+void co_master_cycle(struct co_master *m);
+/* The axis' command for the next cycle's RPDO. */
+void co_master_set(struct co_master *m, uint32_t idx, int enable, int32_t target);
+/* The bus went off (and was restarted by the driver): every operational
+ * node's axis faults with CO_ERR_BUS_OFF; counted. */
+void co_master_bus_off(struct co_master *m);
+const struct co_node *co_master_node(const struct co_master *m, uint32_t idx);
+void co_master_stats(const struct co_master *m, struct co_stats *out);
+
+enum co_402_state co_402_decode(uint16_t statusword);
+const char *co_402_name(enum co_402_state s);
+
+#endif

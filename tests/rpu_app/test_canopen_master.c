@@ -1,0 +1,790 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * Host unit test of rpu_app/src/canopen_master.c, built with
+ * -fsanitize=address,undefined (test_rpu_canopen_host.py). The master's
+ * peer is a scripted CiA 402 drive inside this file: an object dictionary
+ * answering expedited SDOs, NMT, the 402 state machine on the controlword,
+ * a TPDO1 on every SYNC, a heartbeat, EMCY on injected faults, and knobs
+ * to make it misbehave (silent, wrong mapping, SDO abort, no boot-up).
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "canopen_master.h"
+
+static int failed, checks;
+
+#define CHECK(c) do { checks++; if (!(c)) { failed++; \
+	fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__, #c); } } while (0)
+#define CHECK_EQ(a, b) do { long long a_ = (long long)(a), b_ = (long long)(b); checks++; \
+	if (a_ != b_) { failed++; fprintf(stderr, "%s:%d: %s == %lld, expected %s == %lld\n", \
+	__FILE__, __LINE__, #a, a_, #b, b_); } } while (0)
+
+/* ---- the bus: master -> drives (immediately), drives -> master (queued) */
+
+#define QMAX 256
+static struct co_frame to_master[QMAX];
+static unsigned n_to_master;
+static int tx_busy_left;	/* refuse this many sends */
+static unsigned sent_log_n;
+static struct co_frame sent_log[4096];
+
+struct drive {
+	uint8_t id;
+	int present;		/* answers at all */
+	int boots;		/* sends boot-up after NMT reset */
+	int nmt;		/* 0 boot, 4 stopped, 5 operational, 127 pre-op */
+	int hb_silent;		/* stops heartbeats (and everything else) */
+	uint16_t sw;		/* statusword */
+	uint16_t cw;		/* last controlword applied */
+	int8_t mode, mode_disp;
+	uint32_t map1a00[3], map1600[3];
+	uint32_t cob1800, cob1400;
+	uint8_t tt1800, tt1400;
+	uint16_t hb_ms;
+	int32_t pos, target;
+	int32_t rpdo_target;
+	uint16_t rpdo_cw;
+	int rpdo_new;
+	uint32_t abort_index;	/* SDO abort for this index (0: none) */
+	uint32_t cycle;
+	uint16_t pending_emcy;
+	unsigned cw_hist_n;
+	uint16_t cw_hist[64];	/* distinct controlwords applied, in order */
+};
+
+#define ND 3
+static struct drive drv[ND];
+
+static void q_push(uint32_t id, uint8_t dlc, const uint8_t *data)
+{
+	struct co_frame *f;
+
+	if (n_to_master >= QMAX)
+		abort();
+	f = &to_master[n_to_master++];
+	memset(f, 0, sizeof(*f));
+	f->id = id;
+	f->dlc = dlc;
+	if (data)
+		memcpy(f->data, data, dlc);
+}
+
+static void drive_reset(struct drive *d, uint8_t id)
+{
+	memset(d, 0, sizeof(*d));
+	d->id = id;
+	d->present = 1;
+	d->boots = 1;
+	d->nmt = 127;
+	d->sw = 0x0040;	/* switch on disabled */
+	d->map1a00[0] = 2;
+	d->map1a00[1] = 0x60410010u;
+	d->map1a00[2] = 0x60640020u;
+	d->map1600[0] = 2;
+	d->map1600[1] = 0x60400010u;
+	d->map1600[2] = 0x607A0020u;
+	d->cob1800 = 0x40000180u + id;
+	d->cob1400 = 0x200u + id;
+	d->tt1800 = 0xFE;
+	d->tt1400 = 0xFE;
+	d->hb_ms = 0;
+	d->pos = 1000 * id;
+}
+
+static int od_read(struct drive *d, uint16_t idx, uint8_t sub, uint32_t *v, uint32_t *size)
+{
+	*size = 4;
+	switch (idx) {
+	case 0x6061: *v = (uint32_t)(uint8_t)d->mode_disp; *size = 1; return 0;
+	case 0x6060: *v = (uint32_t)(uint8_t)d->mode; *size = 1; return 0;
+	case 0x1A00: if (sub > 2) return -1; *v = d->map1a00[sub]; if (!sub) *size = 1; return 0;
+	case 0x1600: if (sub > 2) return -1; *v = d->map1600[sub]; if (!sub) *size = 1; return 0;
+	case 0x1800: if (sub == 1) { *v = d->cob1800; return 0; }
+		if (sub == 2) { *v = d->tt1800; *size = 1; return 0; } return -1;
+	case 0x1400: if (sub == 1) { *v = d->cob1400; return 0; }
+		if (sub == 2) { *v = d->tt1400; *size = 1; return 0; } return -1;
+	case 0x1017: *v = d->hb_ms; *size = 2; return 0;
+	default: return -1;
+	}
+}
+
+static int od_write(struct drive *d, uint16_t idx, uint8_t sub, uint32_t v)
+{
+	switch (idx) {
+	case 0x6060: d->mode = (int8_t)v; d->mode_disp = (int8_t)v; return 0;
+	case 0x1800: if (sub != 2) return -1; d->tt1800 = (uint8_t)v; return 0;
+	case 0x1400: if (sub != 2) return -1; d->tt1400 = (uint8_t)v; return 0;
+	case 0x1017: d->hb_ms = (uint16_t)v; return 0;
+	default: return -1;
+	}
+}
+
+static void sdo_answer(struct drive *d, const struct co_frame *f)
+{
+	uint8_t r[8] = { 0 };
+	uint16_t idx = (uint16_t)(f->data[1] | f->data[2] << 8);
+	uint8_t sub = f->data[3];
+	uint32_t v = 0, size = 0;
+
+	memcpy(&r[1], &f->data[1], 3);
+	if (d->abort_index == idx) {
+		r[0] = 0x80;
+		r[4] = 0x00; r[5] = 0x00; r[6] = 0x02; r[7] = 0x06;	/* 0x06020000: no object */
+	} else if (f->data[0] == 0x40) {
+		if (od_read(d, idx, sub, &v, &size)) {
+			r[0] = 0x80; r[7] = 0x06; r[6] = 0x02;
+		} else {
+			r[0] = (uint8_t)(0x43 | ((4 - size) << 2));
+			for (uint32_t i = 0; i < size; i++)
+				r[4 + i] = (uint8_t)(v >> (8 * i));
+		}
+	} else if ((f->data[0] & 0xE3) == 0x23) {
+		size = 4 - ((f->data[0] >> 2) & 3);
+		for (uint32_t i = 0; i < size; i++)
+			v |= (uint32_t)f->data[4 + i] << (8 * i);
+		if (od_write(d, idx, sub, v)) {
+			r[0] = 0x80; r[7] = 0x06; r[6] = 0x01;	/* 0x06010000: unsupported access */
+		} else {
+			r[0] = 0x60;
+		}
+	} else {
+		r[0] = 0x80; r[7] = 0x05; r[6] = 0x04; r[4] = 0x01;
+	}
+	q_push(0x580u + d->id, 8, r);
+}
+
+static void cw_record(struct drive *d, uint16_t cw)
+{
+	if (d->cw_hist_n && d->cw_hist[d->cw_hist_n - 1] == cw)
+		return;
+	if (d->cw_hist_n < 64)
+		d->cw_hist[d->cw_hist_n++] = cw;
+}
+
+/* CiA 402 device state machine on one controlword. */
+static void sm_apply(struct drive *d, uint16_t cw)
+{
+	uint16_t st = d->sw & 0x6F;
+	int fault = (d->sw & 0x4F) == 0x08;
+
+	cw_record(d, cw);
+	if (fault) {
+		if ((cw & 0x80) && !(d->cw & 0x80))
+			d->sw = 0x0040;	/* fault reset -> switch on disabled */
+		d->cw = cw;
+		return;
+	}
+	d->cw = cw;
+	if ((cw & 0x02) == 0) {	/* disable voltage */
+		d->sw = 0x0040;
+		return;
+	}
+	if ((cw & 0x87) == 0x06) {	/* shutdown */
+		d->sw = 0x0021;
+		return;
+	}
+	if ((cw & 0x8F) == 0x07) {	/* switch on / disable operation */
+		if (st == 0x21 || st == 0x27 || st == 0x23)
+			d->sw = 0x0023;
+		return;
+	}
+	if ((cw & 0x8F) == 0x0F) {	/* enable operation */
+		if (st == 0x23 || st == 0x27) {
+			if (st == 0x23)
+				d->target = d->pos;
+			d->sw = 0x0027;
+		}
+		return;
+	}
+}
+
+static void drive_fault(struct drive *d, uint16_t code)
+{
+	uint8_t e[8] = { (uint8_t)code, (uint8_t)(code >> 8), 0x01, 0, 0, 0, 0, 0 };
+
+	d->sw = 0x0008;
+	q_push(0x80u + d->id, 8, e);
+}
+
+static void drive_rx(struct drive *d, const struct co_frame *f)
+{
+	if (!d->present || d->hb_silent)
+		return;
+	if (f->id == 0x000 && f->dlc == 2 && (f->data[1] == d->id || f->data[1] == 0)) {
+		if (f->data[0] == 0x82 || f->data[0] == 0x81) {
+			d->nmt = 127;
+			if (d->boots) {
+				uint8_t b = 0;
+
+				q_push(0x700u + d->id, 1, &b);
+			}
+		} else if (f->data[0] == 0x01) {
+			d->nmt = 5;
+		}
+		return;
+	}
+	if (f->id == 0x600u + d->id) {
+		if (f->dlc == 8)
+			sdo_answer(d, f);
+		return;
+	}
+	if (f->id == 0x200u + d->id && d->nmt == 5 && f->dlc == 6) {
+		d->rpdo_cw = (uint16_t)(f->data[0] | f->data[1] << 8);
+		d->rpdo_target = (int32_t)((uint32_t)f->data[2] | (uint32_t)f->data[3] << 8 |
+					   (uint32_t)f->data[4] << 16 | (uint32_t)f->data[5] << 24);
+		d->rpdo_new = 1;
+		return;
+	}
+	if (f->id == 0x080 && f->dlc == 0 && d->nmt == 5) {
+		uint8_t t[6];
+
+		if (d->rpdo_new) {
+			d->rpdo_new = 0;
+			sm_apply(d, d->rpdo_cw);
+			if ((d->sw & 0x6F) == 0x27)
+				d->target = d->rpdo_target;
+		}
+		if ((d->sw & 0x6F) == 0x27)
+			d->pos += (d->target - d->pos) / 2;	/* a crisp servo */
+		t[0] = (uint8_t)d->sw;
+		t[1] = (uint8_t)(d->sw >> 8);
+		for (int i = 0; i < 4; i++)
+			t[2 + i] = (uint8_t)((uint32_t)d->pos >> (8 * i));
+		q_push(0x180u + d->id, 6, t);
+	}
+}
+
+static int fake_send(void *ctx, const struct co_frame *f)
+{
+	(void)ctx;
+	if (tx_busy_left > 0) {
+		tx_busy_left--;
+		return 1;
+	}
+	CHECK(f->dlc <= 8);
+	CHECK(f->id <= 0x7FF);
+	if (sent_log_n < sizeof(sent_log) / sizeof(sent_log[0]))
+		sent_log[sent_log_n++] = *f;
+	for (int i = 0; i < ND; i++)
+		drive_rx(&drv[i], f);
+	return 0;
+}
+
+/* Once per cycle for the drives (1 ms): heartbeats. */
+static void drives_tick(void)
+{
+	for (int i = 0; i < ND; i++) {
+		struct drive *d = &drv[i];
+		uint8_t s = (uint8_t)d->nmt;
+
+		d->cycle++;
+		if (!d->present || d->hb_silent || !d->hb_ms)
+			continue;
+		if (d->cycle % d->hb_ms == 0)
+			q_push(0x700u + d->id, 1, &s);
+	}
+}
+
+static void deliver(struct co_master *m)
+{
+	/* answers to this cycle's frames arrive before the next cycle */
+	unsigned n = n_to_master;
+	struct co_frame tmp[QMAX];
+
+	memcpy(tmp, to_master, n * sizeof(tmp[0]));
+	n_to_master = 0;
+	for (unsigned i = 0; i < n; i++)
+		co_master_rx(m, &tmp[i]);
+}
+
+static void run(struct co_master *m, int cycles)
+{
+	for (int c = 0; c < cycles; c++) {
+		deliver(m);
+		co_master_cycle(m);
+		drives_tick();
+	}
+}
+
+static const struct co_config CFG = {
+	.period_us = 1000, .hb_producer_ms = 10, .hb_consumer_ms = 30, .sdo_timeout_ms = 20,
+	.boot_timeout_ms = 50, .boot_retries = 2, .sdo_retries = 1,
+};
+
+static void setup(struct co_master *m, int n)
+{
+	static const uint8_t ids[ND] = { 1, 2, 5 };
+
+	n_to_master = 0;
+	tx_busy_left = 0;
+	sent_log_n = 0;
+	for (int i = 0; i < ND; i++)
+		drive_reset(&drv[i], ids[i]);
+	CHECK_EQ(co_master_init(m, fake_send, NULL, &CFG, ids, (uint32_t)n), 0);
+	co_master_start(m);
+}
+
+static void enable_all(struct co_master *m, int on)
+{
+	for (uint32_t i = 0; i < m->n_nodes; i++)
+		co_master_set(m, i, on, drv[i].pos);
+}
+
+static void test_init_checks(void)
+{
+	struct co_master m;
+	uint8_t bad0[] = { 0 }, bad128[] = { 128 }, dup[] = { 3, 3 };
+	uint8_t many[CO_MAX_NODES + 1];
+
+	for (unsigned i = 0; i < sizeof(many); i++)
+		many[i] = (uint8_t)(i + 1);
+	CHECK(co_master_init(&m, fake_send, NULL, &CFG, bad0, 1) != 0);
+	CHECK(co_master_init(&m, fake_send, NULL, &CFG, bad128, 1) != 0);
+	CHECK(co_master_init(&m, fake_send, NULL, &CFG, dup, 2) != 0);
+	CHECK(co_master_init(&m, fake_send, NULL, &CFG, many, CO_MAX_NODES + 1) != 0);
+	CHECK(co_master_init(&m, NULL, NULL, &CFG, many, 1) != 0);
+	CHECK(co_master_node(&m, 0) == NULL);
+	CHECK_EQ(co_402_decode(0x0237), CO402_OPERATION_ENABLED);
+	CHECK_EQ(co_402_decode(0x0250), CO402_SWITCH_ON_DISABLED);
+	CHECK_EQ(co_402_decode(0x0231), CO402_READY_TO_SWITCH_ON);
+	CHECK_EQ(co_402_decode(0x0233), CO402_SWITCHED_ON);
+	CHECK_EQ(co_402_decode(0x0218), CO402_FAULT);
+	CHECK_EQ(co_402_decode(0x021F), CO402_FAULT_REACTION_ACTIVE);
+	CHECK_EQ(co_402_decode(0x0217), CO402_QUICK_STOP_ACTIVE);
+	CHECK_EQ(co_402_decode(0x0000), CO402_NOT_READY);
+	CHECK(strcmp(co_402_name(CO402_OPERATION_ENABLED), "operation enabled") == 0);
+}
+
+/* Start-up to operation enabled, the configuration written, the PDOs. */
+static void test_enable_sequence(void)
+{
+	struct co_master m;
+	struct co_stats st;
+	int cyc_to_op = -1;
+
+	setup(&m, 2);
+	for (int c = 0; c < 200 && cyc_to_op < 0; c++) {
+		enable_all(&m, 1);
+		run(&m, 1);
+		if (co_master_node(&m, 0)->state402 == CO402_OPERATION_ENABLED &&
+		    co_master_node(&m, 1)->state402 == CO402_OPERATION_ENABLED)
+			cyc_to_op = c + 1;
+	}
+	printf("enable: both nodes in operation enabled after %d cycles\n", cyc_to_op);
+	CHECK(cyc_to_op > 0 && cyc_to_op < 40);
+	for (int i = 0; i < 2; i++) {
+		const struct co_node *n = co_master_node(&m, (uint32_t)i);
+
+		CHECK_EQ(drv[i].mode, 8);
+		CHECK_EQ(drv[i].tt1800, 1);
+		CHECK_EQ(drv[i].tt1400, 1);
+		CHECK_EQ(drv[i].hb_ms, 10);
+		CHECK_EQ(drv[i].nmt, 5);
+		CHECK_EQ(n->phase, CO_PH_OPERATIONAL);
+		CHECK_EQ(n->fault, 0);
+		/* shutdown -> switch on -> enable operation, nothing else */
+		CHECK(drv[i].cw_hist_n >= 3);
+		CHECK_EQ(drv[i].cw_hist[0], CO_CW_SHUTDOWN);
+		CHECK_EQ(drv[i].cw_hist[1], CO_CW_SWITCH_ON);
+		CHECK_EQ(drv[i].cw_hist[2], CO_CW_ENABLE_OPERATION);
+		CHECK_EQ(drv[i].cw_hist_n, 3);
+	}
+	/* node 5 was never configured: not ours */
+	CHECK_EQ(drv[2].mode, 0);
+
+	/* the target goes through; the position follows */
+	for (int c = 0; c < 50; c++) {
+		co_master_set(&m, 0, 1, 12345);
+		co_master_set(&m, 1, 1, -777);
+		run(&m, 1);
+	}
+	CHECK_EQ(co_master_node(&m, 0)->target_sent, 12345);
+	CHECK_EQ(drv[0].target, 12345);
+	CHECK_EQ(drv[1].target, -777);
+	CHECK(co_master_node(&m, 0)->pos_actual > 12300);
+	CHECK(co_master_node(&m, 1)->pos_actual < -700);
+	co_master_stats(&m, &st);
+	CHECK_EQ(st.sync_sent, st.cycles);
+	CHECK_EQ(st.sync_missed, 0);
+	CHECK_EQ(st.pdo_missing, 0);
+	CHECK_EQ(st.faults, 0);
+	CHECK_EQ(st.hb_timeouts, 0);
+	CHECK_EQ(st.nodes_operational, 2);
+	CHECK(st.hb_rx > 0);
+	CHECK_EQ(st.sdo_ok, 2 * 13);
+	printf("enable: cycles=%u sync=%u rpdo=%u tpdo=%u sdo_ok=%u hb=%u\n", (unsigned)st.cycles,
+	       (unsigned)st.sync_sent, (unsigned)st.rpdo_sent, (unsigned)st.tpdo_rx, (unsigned)st.sdo_ok,
+	       (unsigned)st.hb_rx);
+
+	/* disable: shutdown, the drive leaves operation enabled */
+	enable_all(&m, 0);
+	run(&m, 3);
+	CHECK_EQ(co_master_node(&m, 0)->controlword, CO_CW_SHUTDOWN);
+	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_READY_TO_SWITCH_ON);
+}
+
+/* Until the drive runs enabled, the target sent is its own position. */
+static void test_no_jump_on_enable(void)
+{
+	struct co_master m;
+
+	setup(&m, 1);
+	for (int c = 0; c < 60; c++) {
+		co_master_set(&m, 0, c >= 30, 99999);
+		run(&m, 1);
+		if (co_master_node(&m, 0)->phase == CO_PH_OPERATIONAL &&
+		    co_master_node(&m, 0)->state402 != CO402_OPERATION_ENABLED &&
+		    co_master_node(&m, 0)->pos_valid)
+			CHECK_EQ(co_master_node(&m, 0)->target_sent, co_master_node(&m, 0)->pos_actual);
+	}
+	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_OPERATION_ENABLED);
+	CHECK_EQ(drv[0].target, 99999);
+}
+
+static void test_wrong_mapping_and_abort(void)
+{
+	struct co_master m;
+
+	setup(&m, 2);
+	drv[0].map1a00[2] = 0x606C0020u;	/* velocity instead of position */
+	drv[1].abort_index = 0x6060;
+	enable_all(&m, 1);
+	run(&m, 60);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_FAILED);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 1);
+	CHECK_EQ(co_master_node(&m, 0)->error_code, CO_ERR_CONFIG);
+	CHECK_EQ(co_master_node(&m, 1)->phase, CO_PH_FAILED);
+	CHECK_EQ(co_master_node(&m, 1)->sdo_abort, 0x06020000u);
+	CHECK_EQ(m.st.sdo_abort, 1);
+	CHECK_EQ(drv[0].nmt, 127);	/* never started */
+	/* a failed node gets no PDO; SYNC keeps going */
+	CHECK_EQ(m.st.rpdo_sent, 0);
+	CHECK_EQ(m.st.sync_sent, 60);
+
+	/* fixed, a new enable request retries the start-up */
+	drv[0].map1a00[2] = 0x60640020u;
+	enable_all(&m, 0);
+	run(&m, 1);
+	enable_all(&m, 1);
+	run(&m, 40);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_OPERATIONAL);
+	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_OPERATION_ENABLED);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 0);
+	CHECK_EQ(co_master_node(&m, 1)->phase, CO_PH_FAILED);
+}
+
+static void test_boot_timeout(void)
+{
+	struct co_master m;
+
+	setup(&m, 1);
+	drv[0].boots = 0;
+	run(&m, 50 * 3 + 5);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_FAILED);
+	CHECK_EQ(co_master_node(&m, 0)->error_code, CO_ERR_BOOT_TIMEOUT);
+	CHECK_EQ(m.st.nmt_sent, 3);	/* the first reset and 2 retries */
+}
+
+static void test_sdo_timeout(void)
+{
+	struct co_master m;
+
+	setup(&m, 1);
+	enable_all(&m, 1);
+	run(&m, 3);	/* boot-up answered */
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_CONFIG);
+	drv[0].present = 0;	/* gone mid-configuration */
+	run(&m, 20 * 2 + 5);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_FAILED);
+	CHECK_EQ(m.st.sdo_timeout, 2);
+	CHECK_EQ(co_master_node(&m, 0)->error_code, CO_ERR_CONFIG);
+}
+
+static void bring_up(struct co_master *m, int n)
+{
+	setup(m, n);
+	for (int c = 0; c < 60; c++) {
+		enable_all(m, 1);
+		run(m, 1);
+	}
+	for (int i = 0; i < n; i++)
+		CHECK_EQ(co_master_node(m, (uint32_t)i)->state402, CO402_OPERATION_ENABLED);
+}
+
+static void test_emcy_fault_and_reset(void)
+{
+	struct co_master m;
+	int detect = -1;
+
+	bring_up(&m, 2);
+	drive_fault(&drv[1], 0x8611);	/* following error */
+	for (int c = 0; c < 10 && detect < 0; c++) {
+		run(&m, 1);
+		if (co_master_node(&m, 1)->fault)
+			detect = c + 1;
+	}
+	CHECK_EQ(detect, 1);
+	CHECK_EQ(co_master_node(&m, 1)->error_code, 0x8611);
+	CHECK_EQ(co_master_node(&m, 1)->emcy_last, 0x8611);
+	CHECK_EQ(m.st.emcy, 1);
+	run(&m, 2);
+	CHECK_EQ(co_master_node(&m, 1)->state402, CO402_FAULT);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 0);
+	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_OPERATION_ENABLED);
+	/* the enable request held: still faulted, no reset sent */
+	run(&m, 5);
+	CHECK_EQ(co_master_node(&m, 1)->fault, 1);
+	CHECK_EQ(co_master_node(&m, 1)->state402, CO402_FAULT);
+	/* a new enable request: fault reset, then the sequence again */
+	co_master_set(&m, 1, 0, drv[1].pos);
+	run(&m, 1);
+	drv[1].cw_hist_n = 0;
+	co_master_set(&m, 1, 1, drv[1].pos);
+	run(&m, 8);
+	CHECK_EQ(co_master_node(&m, 1)->fault, 0);
+	CHECK_EQ(co_master_node(&m, 1)->error_code, 0);
+	CHECK_EQ(co_master_node(&m, 1)->state402, CO402_OPERATION_ENABLED);
+	CHECK(drv[1].cw_hist_n >= 2);
+	CHECK_EQ(drv[1].cw_hist[0], CO_CW_FAULT_RESET);
+
+	/* a drive in fault without an EMCY: a generic drive fault */
+	drv[0].sw = 0x0008;
+	run(&m, 3);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 1);
+	CHECK_EQ(co_master_node(&m, 0)->error_code, 0x1000);
+	/* EMCY "no error" does not fault */
+	{
+		uint8_t z[8] = { 0 };
+
+		q_push(0x80u + drv[1].id, 8, z);
+		run(&m, 2);
+		CHECK_EQ(co_master_node(&m, 1)->fault, 0);
+	}
+}
+
+static void test_heartbeat_consumer(void)
+{
+	struct co_master m;
+	int detect = -1;
+
+	bring_up(&m, 2);
+	drv[0].hb_silent = 1;	/* drops off the bus: no TPDO, no heartbeat */
+	for (int c = 0; c < 100 && detect < 0; c++) {
+		run(&m, 1);
+		if (co_master_node(&m, 0)->fault)
+			detect = c + 1;
+	}
+	printf("heartbeat: silent node faulted after %d cycles (consumer %u ms, producer %u ms)\n", detect,
+	       (unsigned)CFG.hb_consumer_ms, (unsigned)CFG.hb_producer_ms);
+	CHECK(detect > 0 && detect <= CFG.hb_consumer_ms + 1);
+	CHECK(detect >= CFG.hb_consumer_ms - CFG.hb_producer_ms);
+	CHECK_EQ(co_master_node(&m, 0)->error_code, CO_ERR_HEARTBEAT);
+	CHECK_EQ(m.st.hb_timeouts, 1);
+	CHECK(m.st.pdo_missing >= (uint32_t)detect - 1);
+	CHECK_EQ(co_master_node(&m, 1)->fault, 0);
+	/* the consumer does not fire again while the node stays silent */
+	run(&m, 100);
+	CHECK_EQ(m.st.hb_timeouts, 1);
+	CHECK_EQ(m.st.faults, 1);
+
+	/* it comes back after a power cycle: boot-up, reconfiguration */
+	drv[0].hb_silent = 0;
+	drv[0].nmt = 127;
+	drv[0].sw = 0x0040;
+	{
+		uint8_t b = 0;
+
+		q_push(0x700u + drv[0].id, 1, &b);
+	}
+	run(&m, 30);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_OPERATIONAL);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 1);	/* latched until a new enable request */
+	co_master_set(&m, 0, 0, 0);
+	run(&m, 1);
+	co_master_set(&m, 0, 1, drv[0].pos);
+	run(&m, 6);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 0);
+	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_OPERATION_ENABLED);
+}
+
+static void test_restart_while_operational(void)
+{
+	struct co_master m;
+	uint8_t b = 0;
+
+	bring_up(&m, 1);
+	drv[0].nmt = 127;
+	drv[0].sw = 0x0040;
+	q_push(0x700u + drv[0].id, 1, &b);
+	run(&m, 1);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 1);
+	CHECK_EQ(co_master_node(&m, 0)->error_code, CO_ERR_RESTARTED);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_CONFIG);
+	run(&m, 30);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_OPERATIONAL);
+}
+
+static void test_tx_full(void)
+{
+	struct co_master m;
+
+	bring_up(&m, 2);
+	m.st = (struct co_stats){ 0 };
+	tx_busy_left = 3;	/* 2 RPDOs and the SYNC of one cycle refused */
+	run(&m, 1);
+	CHECK_EQ(m.st.sync_missed, 1);
+	CHECK_EQ(m.st.rpdo_missed, 2);
+	CHECK_EQ(m.st.tx_busy, 3);
+	run(&m, 1);
+	/* no SYNC went out: no TPDO came, and that is what "missing" counts */
+	CHECK_EQ(m.st.pdo_missing, 0);
+	run(&m, 5);
+	CHECK_EQ(m.st.sync_missed, 1);
+	CHECK_EQ(m.st.sync_sent, 6);
+	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_OPERATION_ENABLED);
+
+	/* bus off: every operational axis faults with its code */
+	co_master_bus_off(&m);
+	CHECK_EQ(m.st.bus_off, 1);
+	CHECK_EQ(co_master_node(&m, 0)->error_code, CO_ERR_BUS_OFF);
+	CHECK_EQ(co_master_node(&m, 1)->error_code, CO_ERR_BUS_OFF);
+}
+
+static void test_pdo_missing(void)
+{
+	struct co_master m;
+
+	bring_up(&m, 2);
+	m.st = (struct co_stats){ 0 };
+	run(&m, 1);
+	n_to_master = 0;	/* the TPDOs of one SYNC lost */
+	run(&m, 1);
+	CHECK_EQ(m.st.pdo_missing, 2);
+	CHECK_EQ(m.st.pdo_missing_last, 2);
+	CHECK_EQ(m.st.pdo_missing_max, 2);
+	run(&m, 1);
+	CHECK_EQ(m.st.pdo_missing_last, 0);
+	CHECK_EQ(m.st.pdo_missing, 2);
+}
+
+/* Malformed and foreign frames: counted, never trusted. */
+static void test_bounds(void)
+{
+	struct co_master m;
+	struct co_frame f;
+	uint32_t bad0;
+
+	bring_up(&m, 2);
+	bad0 = m.st.rx_bad;
+	memset(&f, 0, sizeof(f));
+	f.id = 0x181; f.dlc = 9;
+	co_master_rx(&m, &f);			/* dlc > 8 */
+	f.dlc = 255;
+	co_master_rx(&m, &f);
+	f.id = 0x181; f.dlc = 5;
+	co_master_rx(&m, &f);			/* TPDO too short */
+	f.id = 0x800; f.dlc = 0;
+	co_master_rx(&m, &f);			/* id over 11 bits */
+	f.id = 0xFFFFFFFFu;
+	co_master_rx(&m, &f);
+	f.id = 0x581; f.dlc = 7;
+	co_master_rx(&m, &f);			/* SDO not 8 bytes */
+	f.id = 0x081; f.dlc = 2;
+	co_master_rx(&m, &f);			/* EMCY too short */
+	f.id = 0x701; f.dlc = 0;
+	co_master_rx(&m, &f);			/* heartbeat without a state */
+	f.id = 0x181; f.dlc = 6; f.rtr = 1;
+	co_master_rx(&m, &f);			/* remote frame */
+	CHECK_EQ(m.st.rx_bad - bad0, 9);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 0);
+	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_OPERATION_ENABLED);
+
+	memset(&f, 0, sizeof(f));
+	f.id = 0x185; f.dlc = 6;		/* node 5: on the bus, not ours */
+	co_master_rx(&m, &f);
+	f.id = 0x17F; f.dlc = 8;		/* node 127, EMCY range */
+	co_master_rx(&m, &f);
+	f.id = 0x000; f.dlc = 2;		/* NMT from another master */
+	co_master_rx(&m, &f);
+	f.id = 0x601; f.dlc = 8;		/* an SDO request to node 1 */
+	co_master_rx(&m, &f);
+	f.id = 0x581; f.dlc = 8;		/* an SDO answer nobody asked for */
+	co_master_rx(&m, &f);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 0);
+	CHECK_EQ(m.st.faults, 0);
+	co_master_set(&m, 99, 1, 0);		/* index out of range: ignored */
+	CHECK(co_master_node(&m, 2) == NULL);
+
+	/* an SDO answer for another index during configuration */
+	setup(&m, 1);
+	run(&m, 3);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_CONFIG);
+	memset(&f, 0, sizeof(f));
+	f.id = 0x581; f.dlc = 8; f.data[0] = 0x60; f.data[1] = 0x34; f.data[2] = 0x12;
+	co_master_rx(&m, &f);
+	CHECK_EQ(m.st.sdo_bad, 1);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_CONFIG);
+	/* a segmented upload answer: refused */
+	n_to_master = 0;
+	while (co_master_node(&m, 0)->step != 1 || !co_master_node(&m, 0)->sdo_busy)
+		run(&m, 1);
+	n_to_master = 0;
+	memset(&f, 0, sizeof(f));
+	f.id = 0x581; f.dlc = 8; f.data[0] = 0x41; f.data[1] = 0x61; f.data[2] = 0x60;
+	f.data[4] = 200;
+	co_master_rx(&m, &f);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_FAILED);
+}
+
+/* Random frames into a running master: the sanitizers watch. */
+static void test_fuzz(void)
+{
+	struct co_master m;
+	uint32_t seed = 12345;
+
+	bring_up(&m, 2);
+	for (int i = 0; i < 200000; i++) {
+		struct co_frame f;
+
+		seed = seed * 1103515245u + 12345u;
+		f.id = (seed >> 8) & 0xFFFu;
+		f.dlc = (uint8_t)((seed >> 20) & 0xF);
+		f.rtr = (uint8_t)((seed >> 3) & 1u) & (uint8_t)((seed >> 5) & 1u);
+		for (int b = 0; b < 8; b++) {
+			seed = seed * 1103515245u + 12345u;
+			f.data[b] = (uint8_t)(seed >> 16);
+		}
+		if (i % 4 == 0)
+			f.id = 0x580u + (f.id & 3u);	/* aim at the SDO path */
+		co_master_rx(&m, &f);
+		if (i % 97 == 0) {
+			enable_all(&m, (i / 97) & 1);
+			run(&m, 1);
+		}
+	}
+	printf("fuzz: rx=%u bad=%u ignored=%u faults=%u\n", (unsigned)m.st.rx_frames, (unsigned)m.st.rx_bad,
+	       (unsigned)m.st.rx_ignored, (unsigned)m.st.faults);
+	CHECK(m.st.rx_bad > 0);
+}
+
+int main(void)
+{
+	test_init_checks();
+	test_enable_sequence();
+	test_no_jump_on_enable();
+	test_wrong_mapping_and_abort();
+	test_boot_timeout();
+	test_sdo_timeout();
+	test_emcy_fault_and_reset();
+	test_heartbeat_consumer();
+	test_restart_while_operational();
+	test_tx_full();
+	test_pdo_missing();
+	test_bounds();
+	test_fuzz();
+	printf("canopen_master: %d checks, %d failed\n", checks, failed);
+	return failed ? 1 : 0;
+}
