@@ -248,3 +248,19 @@ def test_rpdo_of_wrong_length_is_refused_with_emcy() -> None:
     b.send(nmt(NMT_START, NODE))
     out = b.send((0x200 + NODE, struct.pack("<H", 6)))
     assert [emcy(f.data)[0] for f in out] == [0x8210]
+
+
+def test_segmented_sdo_upload() -> None:
+    b = Bench()
+    kind = b.send(sdo_upload(NODE, 0x1008, 0))[0].data
+    assert kind[0] == 0x41 and struct.unpack_from("<I", kind, 4)[0] == len(b"servoamp CSP drive")
+    text = b""
+    toggle = 0
+    while True:
+        seg = b.send((0x600 + NODE, bytes([0x60 | toggle << 4]) + bytes(7)))[0].data
+        assert seg[0] & 0x10 == toggle << 4
+        text += seg[1: 8 - ((seg[0] >> 1) & 7)]
+        toggle ^= 1
+        if seg[0] & 1:
+            break
+    assert text == b"servoamp CSP drive"
