@@ -183,6 +183,9 @@ class Bridge:
         self.final_seen = False
         self.meta_written = False
         self.params: dict[str, ParamInfo] = {}
+        # the live view's subscriptions: (server, client id) -> topics
+        self._subs: dict[tuple[bool, int], set[str]] = {}
+        self._subs_lock = threading.Lock()
         self.params_on = params
         self.ws_token = ws_token or secrets.token_urlsafe(18)
         self.ws_host = ws_host
@@ -208,7 +211,7 @@ class Bridge:
                 return foxglove.start_server(
                     name=name, host="127.0.0.1", port=0, context=self.ctx,
                     capabilities=[Capability.Parameters] if params else [],
-                    server_listener=_Listener(self, writable) if params else None,
+                    server_listener=_Listener(self, writable),
                     message_backlog_size=message_backlog, tls_cert=crt, tls_key=key)
 
             try:
@@ -358,6 +361,21 @@ class Bridge:
         if status != 0:
             raise ParamError(status, msg)
         return str(msg)
+
+    def subscribed(self, topics: set[str] | frozenset[str]) -> bool:
+        """True when one live-view client (on either server) has subscribed
+        to every one of topics: from then on it gets each message logged on
+        them (a client that connected is not subscribed yet)."""
+        with self._subs_lock:
+            return any(topics <= t for t in self._subs.values())
+
+    def _subscription(self, writable: bool, client: int, topic: str, on: bool) -> None:
+        with self._subs_lock:
+            t = self._subs.setdefault((writable, client), set())
+            if on:
+                t.add(topic)
+            else:
+                t.discard(topic)
 
     def list_params(self) -> dict[str, ParamInfo]:
         self.params = parse_param_list(self.request("param list"))
@@ -668,6 +686,12 @@ class _Listener(ServerListener):
                 self._status(f"servoamp: param set {p.name} {v!s:.40}: refused: {e}")
             out.append(fox_param(info.name, info.type, info.value))
         return out
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        self.b._subscription(self.writable, int(client.id), str(channel.topic), True)
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        self.b._subscription(self.writable, int(client.id), str(channel.topic), False)
 
     def on_parameters_subscribe(self, param_names: list[str]) -> None:
         return None

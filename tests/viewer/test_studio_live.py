@@ -23,10 +23,12 @@ from __future__ import annotations
 import functools
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
 import threading
+import time
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Any, Callable
@@ -147,7 +149,16 @@ def live(feed_bin: Path, viewer_ready: None, tmp_path_factory: pytest.TempPathFa
 
     def on_event(ev: dict[str, Any]) -> None:
         if ev["event"] == "ready":
-            # the page is connected and subscribed: let the cycles flow
+            # the page shows its panels and topics; the cycles flow once the
+            # bridge's server has taken its subscription to every topic the
+            # layout reads (Studio sends them a moment after it renders: under
+            # load the first cycles went to a page not subscribed yet)
+            want = _layout_topics()
+            deadline = time.monotonic() + 60
+            while not b.subscribed(want):
+                if time.monotonic() > deadline:
+                    raise AssertionError(f"the page never subscribed to all of {sorted(want)}")
+                time.sleep(0.05)
             _second_client(feed.port, stop)
 
     try:
@@ -206,6 +217,12 @@ def test_topics_show_every_cycle_and_the_rate(live: dict[str, Any]) -> None:
 
 def _layout() -> dict[str, Any]:
     return dict(json.loads((TOP / "tools" / "foxglove" / "servoamp-layout.json").read_text()))
+
+
+def _layout_topics() -> frozenset[str]:
+    """The bridge's topics the layout's panels read."""
+    text = (TOP / "tools" / "foxglove" / "servoamp-layout.json").read_text()
+    return frozenset(t for t in bridge.TOPICS if re.search(re.escape(t) + r'\b(?![/_])', text))
 
 
 def _expected(topic: str) -> int:
