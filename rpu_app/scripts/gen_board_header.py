@@ -101,6 +101,121 @@ def ttc_setting(node, freq: int, period_us: int):
     fail(node, f"cycle period {period_us} us not reachable with a 16-bit counter at {freq} Hz")
 
 
+AMP_MAX_AXES = 8      # amp_lib/include/amp/amp_config.h
+CO_MAX_NODES = 8      # rpu_app/src/canopen_master.h
+BACKENDS = {"model": "AXIS_BACKEND_MODEL", "can": "AXIS_BACKEND_CAN"}
+
+
+def opt(node, name: str, default):
+    p = node.props.get(name)
+    return default if p is None else p.val
+
+
+def can_frame_bits(dlc: int) -> int:
+    """Worst-case bits of a standard data frame (stuffing included)."""
+    unstuffed = 34 + 8 * dlc          # SOF..CRC, the stuffed part
+    return unstuffed + (unstuffed - 1) // 4 + 13
+
+
+def fieldbus(servo, period_us: int, put, fail):
+    """The axes (servoamp,servo-axis children) and the CAN controllers they
+    use: BOARD_AXES(X), BOARD_CAN_BUSES(X) and the master's settings.
+    Returns the CAN controller nodes used (their MMU sections)."""
+    axes = [c for c in servo.children.values() if "servoamp,servo-axis" in c.compats]
+    idx = []
+    for a in axes:
+        if not a.regs or a.regs[0].addr is None:
+            fail(a, "needs reg = <axis index>")
+        idx.append(a.regs[0].addr)
+    axes = [a for _, a in sorted(zip(idx, axes), key=lambda t: t[0])]
+    idx = sorted(idx)
+    if idx != list(range(len(idx))):
+        fail(servo, f"axes must be numbered 0..n-1 without gaps, got {idx}")
+    if len(axes) > AMP_MAX_AXES:
+        fail(servo, f"at most {AMP_MAX_AXES} axes")
+    ctrls = opt(servo, "can-controllers", []) or []
+    for c in ctrls:
+        if "xlnx,zynq-can-1.0" not in c.compats:
+            fail(c, "can-controllers must be xlnx,zynq-can-1.0 nodes")
+    bitrate = opt(servo, "can-bitrate", 1_000_000)
+    prio = opt(servo, "can-priority", 0x90)
+    cycle_prio = prop(servo, "cycle-priority")
+    if not 0 <= prio <= 0xF8 or prio % 8 or not prio < cycle_prio:
+        fail(servo, "can-priority must be 0..0xf8, a multiple of 8, higher (numerically lower) than cycle-priority")
+    rows, used_buses, nodes = [], set(), {}
+    for i, a in enumerate(axes):
+        be = prop(a, "servoamp,backend")
+        bus = opt(a, "servoamp,can-bus", 0)
+        node = opt(a, "servoamp,node-id", 0)
+        if be == "can":
+            if "servoamp,can-bus" not in a.props or "servoamp,node-id" not in a.props:
+                fail(a, 'backend "can" needs servoamp,can-bus and servoamp,node-id')
+            if not 0 <= bus < len(ctrls):
+                fail(a, f"servoamp,can-bus {bus}: the servo node has {len(ctrls)} can-controllers")
+            if not 1 <= node <= 127:
+                fail(a, f"servoamp,node-id {node} must be 1..127")
+            if (bus, node) in nodes:
+                fail(a, f"node id {node} on bus {bus} already used by {nodes[(bus, node)]}")
+            nodes[(bus, node)] = a.path
+            used_buses.add(bus)
+        else:
+            bus = node = 0
+        rows.append((i, BACKENDS[be], bus, node))
+    for b in used_buses:
+        n = sum(1 for r in rows if r[1] == "AXIS_BACKEND_CAN" and r[2] == b)
+        if n > CO_MAX_NODES:
+            fail(servo, f"bus {b}: {n} CAN axes, at most {CO_MAX_NODES}")
+        # SYNC + one RPDO and one TPDO of 6 bytes per axis, worst case
+        bits = can_frame_bits(0) + n * 2 * can_frame_bits(6)
+        budget = bitrate * period_us // 1_000_000
+        if bits > budget:
+            fail(servo, f"bus {b}: {n} axes need up to {bits} bit times per cycle, "
+                        f"{budget} available at {bitrate} bit/s and {period_us} us")
+        put(f"BOARD_CAN{b}_LOAD_PERMILLE", bits * 1000 // budget,
+            f"worst-case bus load per cycle, {n} axes")
+    put("BOARD_AXIS_COUNT", len(rows), "axes described (the others: internal model)")
+    put("BOARD_CAN_AXES", sum(1 for r in rows if r[1] == "AXIS_BACKEND_CAN"))
+    put("BOARD_CAN_COUNT", len(ctrls), "CAN controllers the firmware may use")
+    put("BOARD_CAN_USED_MASK", sum(1 << b for b in used_buses), "buses with at least one axis")
+    ref = None
+    bus_rows = []
+    for b, c in enumerate(ctrls):
+        base = one_reg(c)[0]
+        irq, trig = gic_id(c, 0)
+        if irq < 32:
+            fail(c, "the CAN interrupt must be an SPI")
+        hz = prop(c, "clock-frequency")
+        if ref is not None and hz != ref:
+            fail(c, "every CAN controller must have the same clock-frequency")
+        ref = hz
+        bus_rows.append((b, base, irq, 1 if trig == "level" else 0))
+        put(f"BOARD_CAN{b}_BASE", base, c.path)
+        put(f"BOARD_CAN{b}_IRQ", irq, f"GIC ID, {trig}-triggered")
+    if ctrls:
+        if ref % bitrate or not 8 <= ref // bitrate <= 256 * 25:
+            fail(servo, f"can-bitrate {bitrate} not reachable from {ref} Hz")
+        put("BOARD_CAN_REF_HZ", ref)
+    put("BOARD_CAN_BITRATE", bitrate)
+    put("BOARD_CAN_PRIORITY", prio)
+    for name, dflt, lo, hi in (("can-heartbeat-producer-ms", 20, 1, 65535),
+                               ("can-heartbeat-consumer-ms", 60, 1, 65535),
+                               ("can-sdo-timeout-ms", 50, 1, 65535),
+                               ("can-boot-timeout-ms", 500, 1, 65535)):
+        v = opt(servo, name, dflt)
+        if not lo <= v <= hi:
+            fail(servo, f"{name} must be {lo}..{hi}")
+        put("BOARD_" + name.upper().replace("-", "_"), v)
+    if opt(servo, "can-heartbeat-consumer-ms", 60) <= opt(servo, "can-heartbeat-producer-ms", 20):
+        fail(servo, "can-heartbeat-consumer-ms must be longer than can-heartbeat-producer-ms")
+    macros = {
+        "BOARD_AXES": ("X(index, backend, can bus, node id)", [f"X({i}, {be}, {b}, {n})" for i, be, b, n in rows]),
+        "BOARD_CAN_BUSES": ("X(index, base, GIC ID, level)",
+                            [f"X({b}, 0x{base:08x}u, {irq}u, {lvl})" for b, base, irq, lvl in bus_rows]),
+    }
+    put("__X_MACROS__", macros)
+    return [ctrls[b] for b in sorted(used_buses)]
+
+
 def build(dts: Path, bindings: list[Path], board: str):
     try:
         from devicetree import edtlib
@@ -243,12 +358,14 @@ def build(dts: Path, bindings: list[Path], board: str):
         raise GenError(f"{dts}: no xlnx,zynq-slcr node")
     put("BOARD_SLCR_BASE", one_reg(slcr[0])[0], slcr[0].path)
 
+    can_devs = fieldbus(servo, period, put, fail)
+
     put("BOARD_ATTACH_RETRY_CYCLES", prop(servo, "attach-retry-cycles"))
     put("BOARD_STATS_CYCLES", prop(servo, "stats-cycles"))
 
     # ---- MMU map: 1 MiB sections of every device node the firmware uses
     dev_sections: dict[int, str] = {}
-    for n in (uart, ttc, gic, gt, slcr[0]):
+    for n in (uart, ttc, gic, gt, slcr[0], *can_devs):
         for r in n.regs:
             for s in range(r.addr // SECTION, (r.addr + r.size - 1) // SECTION + 1):
                 dev_sections.setdefault(s * SECTION, n.path)
@@ -283,10 +400,17 @@ def render_header(cfg, comments, mmu, board: str, dts: Path) -> str:
         "",
         f'#define BOARD_NAME "{board}"',
     ]
+    xmacros = cfg.get("__X_MACROS__", {})
     for k, v in cfg.items():
+        if k == "__X_MACROS__":
+            continue
         val = f"BOARD_U(0x{v:08x})" if k.endswith(("_BASE", "_ADDR", "_SIZE", "_Q16")) else f"BOARD_U({v})"
         c = comments.get(k)
         out.append(f"#define {k} {val}" + (f"\t/* {c} */" if c else ""))
+    for name, (what, rows) in xmacros.items():
+        out += ["", f"/* {what} */", f"#define {name}(X) \\"]
+        out += [f"\t{r} \\" for r in rows]
+        out.append("")
     out += ["", "#ifndef __ASSEMBLER__",
             "/* MMU regions: X(base, size, attributes) in 1 MiB sections. */",
             "#define BOARD_MMU_REGIONS(X) \\"]

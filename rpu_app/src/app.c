@@ -14,6 +14,12 @@
  * it, then the axis holds that position; status bits SP_AX_SAFESTOP and
  * SP_AX_STANDSTILL report it. Left only by SP_CMD_RESUME.
  *
+ * Backends (axis.h): each axis is closed either by the internal model
+ * below (axis_model_ops) or by a CiA 402 drive on CAN (axis_can_ops,
+ * axis_can.c), as the servo devicetree says (BOARD_AXES). This file keeps
+ * what every axis shares: parameters, the enable decision, the safe-stop
+ * state, the following-error check, the drive bits of the status word.
+ *
  * Arithmetic: single-precision float on the VFPv3-D16 (the firmware is
  * built -mfloat-abi=hard; start.S enables the VFP, irq_entry keeps its
  * state across nested handlers); the cost per cycle is measured by link.c
@@ -25,6 +31,7 @@
 #include "board.h"	/* first: amp_lib port */
 #include "app.h"
 #include "arch.h"
+#include "axis.h"
 #include "ttc.h"
 
 #define STEPS 4u	/* fine sub-steps per cycle (parameter fine_steps) */
@@ -35,14 +42,14 @@ static const struct sp_param_desc params[] = SP_PARAM_TABLE_INIT;
 static volatile uint32_t pval[SP_P_COUNT];
 
 /* Cached parameters (floats) for the cycle: refreshed by app_param_apply. */
-static struct {
-	uint32_t axes;
-	float T, h;		/* cycle and sub-step, s */
-	float pos_kp, vel_kp, vel_ki, vel_max, cur_max, kt, inv_j, friction, decel;
-	float rad_per_inc, inc_per_rad;
-	int32_t fe_max;
-} k;
+static struct axis_params k;
 
+/* Each axis's backend (app_init, from BOARD_AXES). */
+static const struct axis_ops *be[AMP_MAX_AXES];
+
+volatile struct app_debug app_debug;
+
+/* The internal model's state of one axis. */
 struct axis {
 	float th, w;		/* plant: position rad, speed rad/s */
 	float integ;		/* velocity-loop integral, A */
@@ -106,15 +113,36 @@ static void refresh(void)
 	k.axes = pval[SP_P_axes];
 }
 
+static void model_init(uint32_t i)
+{
+	ax[i] = (struct axis){ 0 };
+}
+
 void app_init(void)
 {
 	for (uint32_t i = 0; i < SP_P_COUNT; i++)
 		pval[i] = default_word(&params[i]);
-	for (uint32_t i = 0; i < AMP_MAX_AXES; i++)
-		ax[i] = (struct axis){ 0 };
+	for (uint32_t i = 0; i < AMP_MAX_AXES; i++) {
+		be[i] = &axis_model_ops;
+		model_init(i);
+	}
+#define AXIS_BE(i, backend, bus, node) be[i] = (backend) == AXIS_BACKEND_CAN ? &axis_can_ops : &axis_model_ops;
+	BOARD_AXES(AXIS_BE)
+#undef AXIS_BE
 	safestop = fault = safestops = stop_cycles = resume_req = 0;
 	ss_cycles = 0;
+	app_debug = (struct app_debug){ 0 };
 	refresh();
+	for (uint32_t i = 0; i < AMP_MAX_AXES; i++)
+		if (be[i] != &axis_model_ops)
+			be[i]->init(i);
+	if (axis_can_count())
+		axis_can_init(&k);
+}
+
+const char *app_axis_backend(uint32_t i)
+{
+	return i < AMP_MAX_AXES && be[i] ? be[i]->name : "none";
 }
 
 uint32_t app_param(uint32_t id)
@@ -175,10 +203,8 @@ void app_safestop(uint32_t reason)
 {
 	if (safestop)
 		return;
-	for (uint32_t i = 0; i < AMP_MAX_AXES; i++) {
-		ax[i].ss_v = ax[i].w;
-		ax[i].ss_pos = ax[i].th;
-	}
+	for (uint32_t i = 0; i < AMP_MAX_AXES; i++)
+		be[i]->safestop(i, &k);
 	fault = reason;
 	safestops++;
 	ss_cycles = 0;
@@ -230,87 +256,140 @@ static void loop_step(struct axis *a, float vel_ref)
 	a->th += a->w * k.h;
 }
 
+static void model_safestop(uint32_t i, const struct axis_params *kp)
+{
+	(void)kp;
+	ax[i].ss_v = ax[i].w;
+	ax[i].ss_pos = ax[i].th;
+}
+
+static void model_resume(uint32_t i)
+{
+	ax[i].primed = 0;
+	ax[i].integ = 0.0f;
+}
+
+/* One cycle of the model: STEPS sub-steps of the loops and the plant. */
+static void model_cycle(uint32_t i, const struct axis_params *kp, const struct axis_in *in,
+			struct amp_fb_axis *fb)
+{
+	struct axis *a = &ax[i];
+	uint32_t st = 0;
+	int32_t pos;
+
+	(void)kp;
+	a->flags = 0;
+	if (in->mode == AXIS_SAFESTOP) {
+		float dv = k.decel * k.h;
+
+		for (uint32_t s = 0; s < STEPS; s++) {
+			if (a->ss_v > dv)
+				a->ss_v -= dv;
+			else if (a->ss_v < -dv)
+				a->ss_v += dv;
+			else
+				a->ss_v = 0.0f;
+			a->ss_pos += a->ss_v * k.h;
+			loop_step(a, a->ss_v + k.pos_kp * (a->ss_pos - a->th));
+		}
+		a->primed = 0;
+		st |= SP_AX_SAFESTOP;
+	} else if (in->mode == AXIS_ENABLED) {
+		int32_t target = in->hold && !a->primed ? to_i32(a->th * k.inc_per_rad) : in->target;
+
+		if ((in->fresh && !in->hold) || !a->primed) {
+			a->p0 = a->primed ? a->p1 : target;
+			a->p1 = target;
+			a->primed = 1;
+		} else {
+			a->p0 = a->p1;	/* no new setpoint: hold the last one */
+		}
+		float d = (float)(a->p1 - a->p0) * k.rad_per_inc;
+		float base = (float)a->p0 * k.rad_per_inc;
+		float vff = d / k.T;	/* vel_ff of the record is not used */
+
+		for (uint32_t s = 1; s <= STEPS; s++) {
+			float ref = base + d * (float)s / (float)STEPS;
+
+			loop_step(a, vff + k.pos_kp * (ref - a->th));
+		}
+		st |= SP_AX_ENABLED;
+	} else {
+		/* disabled: no current, the axis coasts on friction */
+		a->integ = 0.0f;
+		a->primed = 0;
+		for (uint32_t s = 0; s < STEPS; s++) {
+			a->cur = 0.0f;
+			a->w -= k.friction * a->w * k.inv_j * k.h;
+			a->th += a->w * k.h;
+		}
+	}
+	pos = to_i32(a->th * k.inc_per_rad);
+	if (absf(a->w * k.inc_per_rad * k.T) < 1.0f)
+		st |= SP_AX_STANDSTILL;
+	fb->status_word = st | a->flags;
+	fb->actual_pos = pos;
+	fb->actual_vel = to_i32(a->w * k.inc_per_rad);
+	fb->current = to_i32(a->cur * 1000.0f);
+	fb->following_error = (st & SP_AX_ENABLED) ? a->p1 - pos : 0;
+}
+
+static uint32_t model_drive(uint32_t i)
+{
+	(void)i;
+	return SP_AX_MAKE_DRIVE(SP_DRIVE_INTERNAL, 0);
+}
+
+const struct axis_ops axis_model_ops = {
+	.name = "model",
+	.init = model_init,
+	.safestop = model_safestop,
+	.resume = model_resume,
+	.cycle = model_cycle,
+	.drive = model_drive,
+};
+
 uint32_t app_cycle(const struct amp_cmd_record *cmd, int fresh, struct amp_fb_axis *fb)
 {
 	uint32_t n = k.axes, still = 0;
+	int can = axis_can_count() != 0;
 
 	if (resume_req) {
 		resume_req = 0;
-		for (uint32_t i = 0; i < AMP_MAX_AXES; i++) {
-			ax[i].primed = 0;
-			ax[i].integ = 0.0f;
-		}
+		for (uint32_t i = 0; i < AMP_MAX_AXES; i++)
+			be[i]->resume(i);
 		safestop = 0;
 		fault = 0;
 	}
 	if (n > AMP_MAX_AXES)
 		n = AMP_MAX_AXES;
+	if (can)
+		axis_can_cycle_begin();
 	for (uint32_t i = 0; i < n; i++) {
-		struct axis *a = &ax[i];
 		const struct amp_cmd_axis *c = cmd && i < cmd->n_axes ? &cmd->axis[i] : 0;
 		int enabled = c && (c->control_word & AMP_AXIS_ENABLE) &&
 			      (cmd->flags & SP_CMDF_MOTION);
-		uint32_t st = 0;
-		int32_t pos;
+		struct axis_in in = { AXIS_DISABLED, fresh, 0, c ? c->target_pos : 0 };
 
-		a->flags = 0;
 		if (safestop) {
-			float dv = k.decel * k.h;
-
-			for (uint32_t s = 0; s < STEPS; s++) {
-				if (a->ss_v > dv)
-					a->ss_v -= dv;
-				else if (a->ss_v < -dv)
-					a->ss_v += dv;
-				else
-					a->ss_v = 0.0f;
-				a->ss_pos += a->ss_v * k.h;
-				loop_step(a, a->ss_v + k.pos_kp * (a->ss_pos - a->th));
-			}
-			a->primed = 0;
-			st |= SP_AX_SAFESTOP;
+			in.mode = AXIS_SAFESTOP;
 		} else if (enabled) {
-			if (fresh || !a->primed) {
-				a->p0 = a->primed ? a->p1 : c->target_pos;
-				a->p1 = c->target_pos;
-				a->primed = 1;
-			} else {
-				a->p0 = a->p1;	/* no new setpoint: hold the last one */
-			}
-			float d = (float)(a->p1 - a->p0) * k.rad_per_inc;
-			float base = (float)a->p0 * k.rad_per_inc;
-			float vff = d / k.T;	/* vel_ff of the record is not used */
-
-			for (uint32_t s = 1; s <= STEPS; s++) {
-				float ref = base + d * (float)s / (float)STEPS;
-
-				loop_step(a, vff + k.pos_kp * (ref - a->th));
-			}
-			st |= SP_AX_ENABLED;
-		} else {
-			/* disabled: no current, the axis coasts on friction */
-			a->integ = 0.0f;
-			a->primed = 0;
-			for (uint32_t s = 0; s < STEPS; s++) {
-				a->cur = 0.0f;
-				a->w -= k.friction * a->w * k.inv_j * k.h;
-				a->th += a->w * k.h;
-			}
+			in.mode = AXIS_ENABLED;
+		} else if (!c && (app_debug.force_enable & (1u << i))) {
+			in.mode = AXIS_ENABLED;	/* debug: enabled, holding its position */
+			in.hold = 1;
+			in.fresh = 0;
 		}
-		pos = to_i32(a->th * k.inc_per_rad);
-		if (absf(a->w * k.inc_per_rad * k.T) < 1.0f) {
-			st |= SP_AX_STANDSTILL;
+		be[i]->cycle(i, &k, &in, &fb[i]);
+		if (fb[i].status_word & SP_AX_STANDSTILL)
 			still++;
-		}
-		fb[i].status_word = st | a->flags;
-		fb[i].actual_pos = pos;
-		fb[i].actual_vel = to_i32(a->w * k.inc_per_rad);
-		fb[i].current = to_i32(a->cur * 1000.0f);
-		fb[i].following_error = (st & SP_AX_ENABLED) ? a->p1 - pos : 0;
-		if ((st & SP_AX_ENABLED) && (fb[i].following_error > k.fe_max ||
-					      fb[i].following_error < -k.fe_max))
+		if ((fb[i].status_word & SP_AX_ENABLED) && (fb[i].following_error > k.fe_max ||
+							     fb[i].following_error < -k.fe_max))
 			fb[i].status_word |= SP_AX_FE_LIMIT;
+		fb[i].status_word |= be[i]->drive(i);
 	}
+	if (can)
+		axis_can_cycle_end();
 	if (safestop) {
 		ss_cycles++;
 		if (!stop_cycles && still == n)

@@ -31,6 +31,17 @@ uint32_t app_fault(void);
 uint32_t app_safestops(void);
 uint32_t app_stop_cycles(void);
 
+/* The backend name of axis i ("model", "can"; axis.h). */
+const char *app_axis_backend(uint32_t i);
+
+/* Debug (the QEMU tests without Linux write it through the gdbstub by
+ * symbol; cleared by app_init): axes whose bit is set run enabled, holding
+ * their position, while no Linux command is held. */
+struct app_debug {
+	uint32_t force_enable;
+};
+extern volatile struct app_debug app_debug;
+
 /* Parameter access (values as 32-bit words). */
 uint32_t app_param(uint32_t id);
 int app_param_check(uint32_t id, uint32_t value);	/* SP_OK or SP_E_* */

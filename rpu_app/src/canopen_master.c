@@ -80,7 +80,7 @@ static void wr_le(uint8_t *p, uint32_t v, uint32_t n)
 		p[i] = (uint8_t)(v >> (8u * i));
 }
 
-static void frame_clear(struct co_frame *f)
+static void frame_clear(struct can_frame *f)
 {
 	f->id = 0;
 	f->dlc = 0;
@@ -89,7 +89,7 @@ static void frame_clear(struct co_frame *f)
 		f->data[i] = 0;
 }
 
-static int tx(struct co_master *m, const struct co_frame *f)
+static int tx(struct co_master *m, const struct can_frame *f)
 {
 	if (m->send(m->ctx, f)) {
 		m->st.tx_busy++;
@@ -225,7 +225,7 @@ void co_master_bus_off(struct co_master *m)
 static int sdo_send_step(struct co_master *m, struct co_node *n)
 {
 	const struct cfg_step *s = &steps[n->step];
-	struct co_frame f;
+	struct can_frame f;
 
 	frame_clear(&f);
 	f.id = COB_SDO_RX + n->node_id;
@@ -256,7 +256,7 @@ static void config_failed(struct co_master *m, struct co_node *n)
 	raise_fault(m, n, CO_ERR_CONFIG);
 }
 
-static void sdo_rx(struct co_master *m, struct co_node *n, const struct co_frame *f)
+static void sdo_rx(struct co_master *m, struct co_node *n, const struct can_frame *f)
 {
 	const struct cfg_step *s;
 	uint8_t cs;
@@ -313,7 +313,7 @@ static void sdo_rx(struct co_master *m, struct co_node *n, const struct co_frame
 
 /* ---- receive ------------------------------------------------------- */
 
-void co_master_rx(struct co_master *m, const struct co_frame *f)
+void co_master_rx(struct co_master *m, const struct can_frame *f)
 {
 	uint32_t fn, id;
 	struct co_node *n;
@@ -414,7 +414,7 @@ void co_master_rx(struct co_master *m, const struct co_frame *f)
 
 static void startup_step(struct co_master *m, struct co_node *n)
 {
-	struct co_frame f;
+	struct can_frame f;
 
 	switch (n->phase) {
 	case CO_PH_RESET:
@@ -507,7 +507,7 @@ static uint16_t controlword(struct co_master *m, struct co_node *n)
 
 static void send_rpdo(struct co_master *m, struct co_node *n)
 {
-	struct co_frame f;
+	struct can_frame f;
 	uint16_t cw = controlword(m, n);
 	int32_t tgt;
 
@@ -533,7 +533,7 @@ static void send_rpdo(struct co_master *m, struct co_node *n)
 
 void co_master_cycle(struct co_master *m)
 {
-	struct co_frame f;
+	struct can_frame f;
 	uint32_t missing = 0, operational = 0;
 
 	m->cycle++;

@@ -4,6 +4,8 @@
 
 #include <stdint.h>
 
+#include "can_frame.h"
+
 /*
  * canopen_master.c - a small CANopen master for CiA 402 drives in cyclic
  * synchronous position mode (CSP), one instance per CAN bus.
@@ -40,16 +42,8 @@
 
 #define CO_MAX_NODES 8u		/* nodes per bus (master) */
 
-/* One classic CAN frame (standard 11-bit identifiers only). */
-struct co_frame {
-	uint32_t id;		/* 11-bit COB-ID */
-	uint8_t dlc;		/* 0..8 */
-	uint8_t rtr;
-	uint8_t data[8];
-};
-
 /* Returns 0 when the frame was queued, non-zero when the TX path is full. */
-typedef int (*co_send_fn)(void *ctx, const struct co_frame *f);
+typedef int (*co_send_fn)(void *ctx, const struct can_frame *f);
 
 /* Node (axis) progress through the start-up. */
 enum co_node_phase {
@@ -171,7 +165,7 @@ int co_master_init(struct co_master *m, co_send_fn send, void *ctx, const struct
 /* Begin the start-up of every node (NMT reset on the next cycle). */
 void co_master_start(struct co_master *m);
 /* One received frame (any COB-ID; what is not ours is counted and dropped). */
-void co_master_rx(struct co_master *m, const struct co_frame *f);
+void co_master_rx(struct co_master *m, const struct can_frame *f);
 /* One cycle: timeouts, start-up steps, RPDOs then SYNC. */
 void co_master_cycle(struct co_master *m);
 /* The axis' command for the next cycle's RPDO. */

@@ -12,6 +12,9 @@
 
 #include "arch.h"
 #include "board.h"
+#if HAVE_AMP_LIB
+#include "axis.h"
+#endif
 #include "gic.h"
 #include "gtimer.h"
 #include "idle_timer.h"
@@ -213,6 +216,10 @@ static void print_stats(void)
 		   (unsigned)irq_disabled_last(), (unsigned)ls.trace_wraps,
 		   (unsigned)ls.uart_dropped,
 		   (unsigned)svc_stack_used());
+#if HAVE_AMP_LIB
+	if (axis_can_count())
+		axis_can_log_stats();
+#endif
 }
 
 static int stop_requested(void)
@@ -225,6 +232,10 @@ __attribute__((noreturn)) void servo_quiesce_and_park(void)
 	cpu_irq_disable();
 	ttc_cycle_stop();
 	idle_timer_stop();
+#if HAVE_AMP_LIB
+	if (axis_can_count())
+		axis_can_stop();	/* the CAN controllers off the bus */
+#endif
 	irq_release_all();
 	gic_cpu_disable();
 	log_printf("stop: STOP seen after %u cycles; interrupts released, timer stopped; parking at %p\n",

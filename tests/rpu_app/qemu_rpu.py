@@ -148,7 +148,8 @@ def _symbol(path: Path, name: str) -> int:
 class QemuRpu:
     """One QEMU run of the firmware alone, as a context manager."""
 
-    def __init__(self, workdir: Path, stub: Path, firmware: Path, extra: list[str] | None = None):
+    def __init__(self, workdir: Path, stub: Path, firmware: Path, extra: list[str] | None = None,
+                 can_links: dict[int, Path] | None = None, can_link_opts: dict[str, int] | None = None):
         self.dir = Path(workdir)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.gdb_path = self.dir / "gdb.sock"
@@ -167,7 +168,8 @@ class QemuRpu:
                        f"data={_elf_entry(firmware):#x},data-len=4",
         ]
         self.machine = qemu.QemuMachine(qemu.Board.load(BOARD), None, run_dir=self.dir, keep_logs=True,
-                                        extra_args=loaders + (extra or []))
+                                        extra_args=loaders + (extra or []),
+                                        can_links=can_links, can_link_opts=can_link_opts)
         self.gdb: GdbRemote | None = None
 
     def start(self) -> QemuRpu:

@@ -25,11 +25,11 @@ static int failed, checks;
 /* ---- the bus: master -> drives (immediately), drives -> master (queued) */
 
 #define QMAX 256
-static struct co_frame to_master[QMAX];
+static struct can_frame to_master[QMAX];
 static unsigned n_to_master;
 static int tx_busy_left;	/* refuse this many sends */
 static unsigned sent_log_n;
-static struct co_frame sent_log[4096];
+static struct can_frame sent_log[4096];
 
 struct drive {
 	uint8_t id;
@@ -60,7 +60,7 @@ static struct drive drv[ND];
 
 static void q_push(uint32_t id, uint8_t dlc, const uint8_t *data)
 {
-	struct co_frame *f;
+	struct can_frame *f;
 
 	if (n_to_master >= QMAX)
 		abort();
@@ -122,7 +122,7 @@ static int od_write(struct drive *d, uint16_t idx, uint8_t sub, uint32_t v)
 	}
 }
 
-static void sdo_answer(struct drive *d, const struct co_frame *f)
+static void sdo_answer(struct drive *d, const struct can_frame *f)
 {
 	uint8_t r[8] = { 0 };
 	uint16_t idx = (uint16_t)(f->data[1] | f->data[2] << 8);
@@ -209,7 +209,7 @@ static void drive_fault(struct drive *d, uint16_t code)
 	q_push(0x80u + d->id, 8, e);
 }
 
-static void drive_rx(struct drive *d, const struct co_frame *f)
+static void drive_rx(struct drive *d, const struct can_frame *f)
 {
 	if (!d->present || d->hb_silent)
 		return;
@@ -257,7 +257,7 @@ static void drive_rx(struct drive *d, const struct co_frame *f)
 	}
 }
 
-static int fake_send(void *ctx, const struct co_frame *f)
+static int fake_send(void *ctx, const struct can_frame *f)
 {
 	(void)ctx;
 	if (tx_busy_left > 0) {
@@ -292,7 +292,7 @@ static void deliver(struct co_master *m)
 {
 	/* answers to this cycle's frames arrive before the next cycle */
 	unsigned n = n_to_master;
-	struct co_frame tmp[QMAX];
+	struct can_frame tmp[QMAX];
 
 	memcpy(tmp, to_master, n * sizeof(tmp[0]));
 	n_to_master = 0;
@@ -674,7 +674,7 @@ static void test_pdo_missing(void)
 static void test_bounds(void)
 {
 	struct co_master m;
-	struct co_frame f;
+	struct can_frame f;
 	uint32_t bad0;
 
 	bring_up(&m, 2);
@@ -746,8 +746,8 @@ static void test_fuzz(void)
 	uint32_t seed = 12345;
 
 	bring_up(&m, 2);
-	for (int i = 0; i < 200000; i++) {
-		struct co_frame f;
+	for (int i = 0; i < 60000; i++) {
+		struct can_frame f;
 
 		seed = seed * 1103515245u + 12345u;
 		f.id = (seed >> 8) & 0xFFFu;

@@ -89,3 +89,82 @@ def test_period_from_devicetree(tmp_path):
     assert cfg["BOARD_CYCLE_PERIOD_US"] == 250
     div = (2 << cfg["BOARD_CYCLE_PS_V"]) if cfg["BOARD_CYCLE_PS_EN"] else 1
     assert abs((cfg["BOARD_CYCLE_INTERVAL"] + 1) * div * 1e9 / cfg["BOARD_TTC_HZ"] - 250_000) < 100
+
+
+# ---- axes and their backends (issue 22) -----------------------------------
+
+CAN_DTS = REPO / "boards" / BOARD / "servo-can.dts"
+
+
+def axes_of(hdr: str) -> list[tuple[int, str, int, int]]:
+    block = re.search(r"#define BOARD_AXES\(X\) \\\n(.*?)\n\n", hdr, re.S)
+    assert block, hdr
+    return [(int(i), be, int(b), int(n))
+            for i, be, b, n in re.findall(r"X\((\d+), (AXIS_BACKEND_\w+), (\d+), (\d+)\)", block.group(1))]
+
+
+def test_default_axes_are_the_internal_model(tmp_path):
+    """The board's default: today's 4 internal-model axes, no CAN bus used."""
+    assert gen(DTS, tmp_path).returncode == 0
+    hdr = (tmp_path / "board_config.h").read_text()
+    cfg = parse_board_config(tmp_path / "board_config.h")
+    assert axes_of(hdr) == [(i, "AXIS_BACKEND_MODEL", 0, 0) for i in range(4)]
+    assert cfg["BOARD_CAN_AXES"] == 0 and cfg["BOARD_CAN_USED_MASK"] == 0
+    assert cfg["BOARD_CAN_COUNT"] == 2
+    assert (cfg["BOARD_CAN0_BASE"], cfg["BOARD_CAN0_IRQ"]) == (0xE0008000, 60)
+    assert (cfg["BOARD_CAN1_BASE"], cfg["BOARD_CAN1_IRQ"]) == (0xE0009000, 83)
+
+
+def test_can_board_four_drives_two_per_bus(tmp_path):
+    r = gen(CAN_DTS, tmp_path)
+    assert r.returncode == 0, r.stderr
+    hdr = (tmp_path / "board_config.h").read_text()
+    cfg = parse_board_config(tmp_path / "board_config.h")
+    assert axes_of(hdr) == [(0, "AXIS_BACKEND_CAN", 0, 1), (1, "AXIS_BACKEND_CAN", 0, 2),
+                            (2, "AXIS_BACKEND_CAN", 1, 1), (3, "AXIS_BACKEND_CAN", 1, 2)]
+    assert cfg["BOARD_CAN_AXES"] == 4 and cfg["BOARD_CAN_USED_MASK"] == 3
+    assert cfg["BOARD_CAN_BITRATE"] == 1_000_000 and cfg["BOARD_CAN_REF_HZ"] == 100_000_000
+    assert cfg["BOARD_CAN_PRIORITY"] < cfg["BOARD_CYCLE_PRIORITY"]
+    assert cfg["BOARD_CAN_HEARTBEAT_CONSUMER_MS"] > cfg["BOARD_CAN_HEARTBEAT_PRODUCER_MS"]
+    # SYNC + 2 x (RPDO + TPDO), worst-case stuffing, at 1 Mbit/s and 1 kHz
+    assert cfg["BOARD_CAN0_LOAD_PERMILLE"] == cfg["BOARD_CAN1_LOAD_PERMILLE"] == 515
+    for k, v in CONTRACT.items():
+        assert cfg[k] == v, k
+    mmu = re.findall(r"X\((0x[0-9a-f]+)u, (0x[0-9a-f]+)u, (MMU_\w+)\)", hdr)
+    assert {m[0] for m in mmu if m[2] == "MMU_DEVICE"} == {"0xe0000000", "0xf8000000", "0xf8f00000"}
+
+
+def _can_variant(tmp_path, axis_body: str, extra: str = ""):
+    src = tmp_path / "servo.dts"
+    src.write_text(DTS.read_text())
+    (tmp_path / "bad.dts").write_text(f'/include/ "servo.dts"\n{extra}\n{axis_body}\n')
+    return gen(tmp_path / "bad.dts", tmp_path / "out")
+
+
+@pytest.mark.parametrize("body,msg", [
+    ('&axis0 { servoamp,backend = "can"; servoamp,can-bus = <0>; servoamp,node-id = <0>; };', "node-id"),
+    ('&axis0 { servoamp,backend = "can"; servoamp,can-bus = <0>; servoamp,node-id = <128>; };', "node-id"),
+    ('&axis0 { servoamp,backend = "can"; servoamp,can-bus = <2>; servoamp,node-id = <1>; };', "can-bus"),
+    ('&axis0 { servoamp,backend = "can"; servoamp,can-bus = <0>; };', "servoamp,node-id"),
+    ('&axis0 { servoamp,backend = "ethercat"; };', "backend"),
+    ('&axis0 { servoamp,backend = "can"; servoamp,can-bus = <0>; servoamp,node-id = <3>; };\n'
+     '&axis1 { servoamp,backend = "can"; servoamp,can-bus = <0>; servoamp,node-id = <3>; };', "already used"),
+    ('&axis3 { reg = <5>; };', "without gaps"),
+    ('&servo { can-priority = <0xa8>; };', "can-priority"),
+    ('&servo { can-heartbeat-consumer-ms = <10>; };', "can-heartbeat-consumer-ms"),
+])
+def test_generator_rejects_bad_axes(tmp_path, body, msg):
+    r = _can_variant(tmp_path, body)
+    assert r.returncode != 0, "accepted:\n" + body
+    assert msg in r.stderr, r.stderr
+
+
+def test_generator_rejects_a_bus_over_budget(tmp_path):
+    """At a 500 us cycle, two drives on one bus need more bit times than 1 Mbit/s gives; one fits."""
+    body = "\n".join(f'&axis{i} {{ servoamp,backend = "can"; servoamp,can-bus = <0>; '
+                     f'servoamp,node-id = <{i + 1}>; }};' for i in range(2))
+    r = _can_variant(tmp_path, body, '&servo { cycle-period-us = <500>; };')
+    assert r.returncode != 0
+    assert "bit times per cycle" in r.stderr
+    r = _can_variant(tmp_path, body.split("\n")[0], '&servo { cycle-period-us = <500>; };')
+    assert r.returncode == 0, r.stderr

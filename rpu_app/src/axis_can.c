@@ -1,0 +1,410 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * axis_can.c - the CAN-drive axis backend (axis.h): each such axis is a
+ * CiA 402 drive in cyclic synchronous position mode on one of the
+ * firmware's CAN controllers (canps.c), driven by one CANopen master per
+ * bus (canopen_master.c). All from the servo devicetree: BOARD_AXES(X)
+ * (backend, bus, node id), BOARD_CAN_BUSES(X) (controllers), the bit rate,
+ * the interrupt priority and the master's timeouts.
+ *
+ * One cycle (app_cycle, in the cycle interrupt):
+ *   axis_can_cycle_begin  bus-off restart if the interrupt saw one (the
+ *                         axes of that bus fault with 0x8140), then every
+ *                         frame the interrupt put in the ring goes to the
+ *                         bus's master (TPDOs answering the last SYNC,
+ *                         heartbeats, EMCY, SDO answers)
+ *   can_cycle (per axis)  the axis's target and enable request for the
+ *                         master; its feedback from the last TPDO1
+ *   axis_can_cycle_end    each master's cycle: start-up steps, one RPDO
+ *                         per operational drive, then the SYNC
+ * Nothing here waits for the bus: a full TX FIFO is counted (co_stats).
+ *
+ * Where the drive state and error code live: struct co_node (state402,
+ * phase, fault, error_code, emcy_last) inside each bus's master; the cycle
+ * puts them in every feedback record's status word (SP_AX_MAKE_DRIVE,
+ * bits 8-11 state, 16-31 error code) through can_drive().
+ */
+#include <stdint.h>
+
+#include "board.h"
+#include "axis.h"
+#include "canopen_master.h"
+#include "canps.h"
+#include "arch.h"
+#include "irq.h"
+#include "log.h"
+
+#define STEPS 4u	/* safe-stop ramp sub-steps per cycle, as the model's */
+#define NBUS (BOARD_CAN_COUNT ? BOARD_CAN_COUNT : 1u)
+
+struct can_axis {
+	uint8_t used;
+	uint8_t bus;
+	uint8_t node;
+	uint8_t idx;		/* the node's index in its master */
+	uint8_t primed;		/* p1 valid */
+	uint8_t prev_valid;
+	uint8_t ss_active;	/* safe stop ramps the drive (it was enabled) */
+	uint8_t last_phase, last_state, last_fault;
+	uint16_t last_error;
+	uint32_t last_st;	/* last cycle's status bits */
+	int32_t p1;		/* coarse target */
+	int32_t prev_pos;
+	int32_t vel;		/* increments / s */
+	float ss_v, ss_pos;	/* safe stop ramp, rad/s and rad */
+};
+
+struct can_bus {
+	uint8_t used;
+	uint8_t ok;		/* controller configured */
+	uint32_t irq;
+	uintptr_t base;
+	uint32_t n_nodes;
+	uint8_t node_ids[CO_MAX_NODES];
+	struct canps dev;
+	struct co_master m;
+};
+
+static struct can_bus bus[NBUS];
+static struct can_axis cax[AMP_MAX_AXES];
+static uint32_t n_can;
+
+static int32_t to_i32(float v)
+{
+	if (v > 2147483000.0f)
+		return 2147483647;
+	if (v < -2147483000.0f)
+		return -2147483647;
+	return (int32_t)(v + (v >= 0.0f ? 0.5f : -0.5f));
+}
+
+static int send_frame(void *ctx, const struct can_frame *f)
+{
+	return canps_send(ctx, f) != 0;
+}
+
+uint32_t axis_can_count(void)
+{
+	return (uint32_t)BOARD_CAN_AXES;
+}
+
+void axis_can_init(const struct axis_params *k)
+{
+	static const struct canps_filter filters[4] = {
+		{ 0x780u, 0x080u },	/* EMCY 0x081..0x0FF */
+		{ 0x780u, 0x180u },	/* TPDO1 */
+		{ 0x780u, 0x580u },	/* SDO answers */
+		{ 0x780u, 0x700u },	/* heartbeat, boot-up */
+	};
+	struct co_config cfg = {
+		.period_us = (uint32_t)(k->T * 1e6f + 0.5f),
+		.hb_producer_ms = BOARD_CAN_HEARTBEAT_PRODUCER_MS,
+		.hb_consumer_ms = BOARD_CAN_HEARTBEAT_CONSUMER_MS,
+		.sdo_timeout_ms = BOARD_CAN_SDO_TIMEOUT_MS,
+		.boot_timeout_ms = BOARD_CAN_BOOT_TIMEOUT_MS,
+		.boot_retries = 3,
+		.sdo_retries = 2,
+	};
+	struct canps_timing t;
+
+	n_can = 0;
+	for (uint32_t b = 0; b < NBUS; b++)
+		bus[b] = (struct can_bus){ 0 };
+	for (uint32_t i = 0; i < AMP_MAX_AXES; i++)
+		cax[i] = (struct can_axis){ 0 };
+#define BUS_ROW(b, base_, irq_, lvl) bus[b].base = (base_); bus[b].irq = (irq_);
+	BOARD_CAN_BUSES(BUS_ROW)
+#undef BUS_ROW
+#define AXIS_ROW(i, backend, b, node_)						\
+	if ((backend) == AXIS_BACKEND_CAN && (b) < NBUS && bus[b].n_nodes < CO_MAX_NODES) { \
+		cax[i].used = 1;						\
+		cax[i].bus = (uint8_t)(b);					\
+		cax[i].node = (uint8_t)(node_);					\
+		cax[i].idx = (uint8_t)bus[b].n_nodes;				\
+		cax[i].last_phase = 0xFFu;					\
+		bus[b].node_ids[bus[b].n_nodes++] = (uint8_t)(node_);		\
+		bus[b].used = 1;						\
+		n_can++;							\
+	}
+	BOARD_AXES(AXIS_ROW)
+#undef AXIS_ROW
+	if (canps_timing_for(BOARD_CAN_REF_HZ, BOARD_CAN_BITRATE, &t)) {
+		log_printf("error: can: %u bit/s not reachable from %u Hz\n", (unsigned)BOARD_CAN_BITRATE,
+			   (unsigned)BOARD_CAN_REF_HZ);
+		return;
+	}
+	for (uint32_t b = 0; b < NBUS; b++) {
+		struct can_bus *cb = &bus[b];
+
+		if (!cb->used)
+			continue;
+		if (canps_init(&cb->dev, cb->base, &t, filters, 4)) {
+			log_printf("error: can%u: controller at %08x never entered configuration mode\n",
+				   (unsigned)b, (unsigned)cb->base);
+			continue;
+		}
+		if (co_master_init(&cb->m, send_frame, &cb->dev, &cfg, cb->node_ids, cb->n_nodes)) {
+			log_printf("error: can%u: bad node list\n", (unsigned)b);
+			canps_stop(&cb->dev);
+			continue;
+		}
+		if (irq_register(cb->irq, canps_irq, 0, IRQ_TRIGGER_LEVEL, &cb->dev) ||
+		    irq_set_priority(cb->irq, BOARD_CAN_PRIORITY) || irq_enable(cb->irq)) {
+			log_printf("error: can%u: interrupt %u not registered\n", (unsigned)b, (unsigned)cb->irq);
+			canps_stop(&cb->dev);
+			continue;
+		}
+		co_master_start(&cb->m);
+		cb->ok = 1;
+		log_printf("can%u: controller %08x irq %u prio %02x, %u bit/s (brpr %u btr %03x), %u drive(s), "
+			   "heartbeat %u/%u ms\n",
+			   (unsigned)b, (unsigned)cb->base, (unsigned)cb->irq, (unsigned)BOARD_CAN_PRIORITY,
+			   (unsigned)BOARD_CAN_BITRATE, (unsigned)t.brpr, (unsigned)t.btr, (unsigned)cb->n_nodes,
+			   (unsigned)cfg.hb_producer_ms, (unsigned)cfg.hb_consumer_ms);
+	}
+	for (uint32_t i = 0; i < AMP_MAX_AXES; i++)
+		if (cax[i].used)
+			log_printf("axis%u: CiA 402 drive, can%u node %u\n", (unsigned)i, (unsigned)cax[i].bus,
+				   (unsigned)cax[i].node);
+}
+
+void axis_can_cycle_begin(void)
+{
+	for (uint32_t b = 0; b < NBUS; b++) {
+		struct can_bus *cb = &bus[b];
+		struct can_frame f;
+
+		if (!cb->ok)
+			continue;
+		if (canps_service(&cb->dev) == 1) {
+			co_master_bus_off(&cb->m);
+			log_printf("can%u: bus off: controller restarted (%u so far)\n", (unsigned)b,
+				   (unsigned)cb->dev.st.bus_off_recoveries);
+		}
+		for (uint32_t n = 0; n < CANPS_RX_RING && canps_recv(&cb->dev, &f); n++)
+			co_master_rx(&cb->m, &f);
+	}
+}
+
+void axis_can_cycle_end(void)
+{
+	for (uint32_t b = 0; b < NBUS; b++)
+		if (bus[b].ok)
+			co_master_cycle(&bus[b].m);
+}
+
+void axis_can_stop(void)
+{
+	for (uint32_t b = 0; b < NBUS; b++)
+		if (bus[b].ok)
+			canps_stop(&bus[b].dev);
+}
+
+static const struct co_node *node_of(uint32_t i)
+{
+	const struct can_axis *a = &cax[i];
+
+	if (i >= AMP_MAX_AXES || !a->used || !bus[a->bus].ok)
+		return 0;
+	return co_master_node(&bus[a->bus].m, a->idx);
+}
+
+static void can_init(uint32_t i)
+{
+	(void)i;	/* axis_can_init sets up every CAN axis at once */
+}
+
+static void can_safestop(uint32_t i, const struct axis_params *k)
+{
+	struct can_axis *a = &cax[i];
+	const struct co_node *n = node_of(i);
+
+	a->ss_active = n && (a->last_st & SP_AX_ENABLED);
+	if (!a->ss_active)
+		return;
+	a->ss_v = (float)a->vel * k->rad_per_inc;
+	a->ss_pos = (float)n->target_sent * k->rad_per_inc;	/* what the drive follows */
+}
+
+static void can_resume(uint32_t i)
+{
+	cax[i].primed = 0;
+	cax[i].ss_active = 0;
+}
+
+static void log_changes(uint32_t i, const struct co_node *n)
+{
+	struct can_axis *a = &cax[i];
+
+	if (n->phase == a->last_phase && n->state402 == a->last_state && n->fault == a->last_fault &&
+	    n->error_code == a->last_error)
+		return;
+	a->last_phase = n->phase;
+	a->last_state = n->state402;
+	a->last_fault = n->fault;
+	a->last_error = n->error_code;
+	if (n->phase == CO_PH_OPERATIONAL)
+		log_printf("axis%u: can%u node %u: %s%s error %04x\n", (unsigned)i, (unsigned)a->bus,
+			   (unsigned)a->node, co_402_name((enum co_402_state)n->state402),
+			   n->fault ? ", fault," : ",", (unsigned)n->error_code);
+	else
+		log_printf("axis%u: can%u node %u: phase %u%s error %04x\n", (unsigned)i, (unsigned)a->bus,
+			   (unsigned)a->node, (unsigned)n->phase, n->fault ? ", fault," : ",",
+			   (unsigned)n->error_code);
+}
+
+static void can_cycle(uint32_t i, const struct axis_params *k, const struct axis_in *in,
+		      struct amp_fb_axis *fb)
+{
+	struct can_axis *a = &cax[i];
+	const struct co_node *n = node_of(i);
+	int32_t pos, target;
+	uint32_t st = 0;
+	int enable = 0;
+
+	if (!n) {	/* the bus never came up */
+		*fb = (struct amp_fb_axis){ 0 };
+		a->last_st = 0;
+		return;
+	}
+	pos = n->pos_valid ? n->pos_actual : (a->prev_valid ? a->prev_pos : 0);
+	target = pos;
+	if (in->mode == AXIS_SAFESTOP) {
+		if (a->ss_active) {
+			float dv = k->decel * k->h;
+
+			for (uint32_t s = 0; s < STEPS; s++) {
+				if (a->ss_v > dv)
+					a->ss_v -= dv;
+				else if (a->ss_v < -dv)
+					a->ss_v += dv;
+				else
+					a->ss_v = 0.0f;
+				a->ss_pos += a->ss_v * k->h;
+			}
+			target = to_i32(a->ss_pos * k->inc_per_rad);
+			enable = 1;
+		}
+		a->primed = 0;
+		st |= SP_AX_SAFESTOP;
+	} else if (in->mode == AXIS_ENABLED) {
+		if (in->hold) {
+			if (!a->primed)
+				a->p1 = pos;
+		} else if (in->fresh || !a->primed) {
+			a->p1 = in->target;
+		}
+		a->primed = 1;
+		target = a->p1;
+		enable = 1;
+	} else {
+		a->primed = 0;
+	}
+	co_master_set(&bus[a->bus].m, a->idx, enable, target);
+
+	if (enable && !n->fault && n->phase == CO_PH_OPERATIONAL && n->state402 == CO402_OPERATION_ENABLED &&
+	    in->mode == AXIS_ENABLED)
+		st |= SP_AX_ENABLED;
+	if (a->prev_valid) {
+		a->vel = to_i32((float)(pos - a->prev_pos) / k->T);
+		if (pos == a->prev_pos)
+			st |= SP_AX_STANDSTILL;
+	} else {
+		a->vel = 0;
+		st |= SP_AX_STANDSTILL;
+	}
+	a->prev_pos = pos;
+	a->prev_valid = n->pos_valid;
+	a->last_st = st;
+	fb->status_word = st;
+	fb->actual_pos = pos;
+	fb->actual_vel = a->vel;
+	fb->current = 0;	/* not mapped in TPDO1 */
+	fb->following_error = (st & SP_AX_ENABLED) ? a->p1 - pos : 0;
+	log_changes(i, n);
+}
+
+static uint32_t can_drive(uint32_t i)
+{
+	const struct co_node *n = node_of(i);
+	uint32_t state;
+
+	if (!n)
+		return SP_AX_MAKE_DRIVE(SP_DRIVE_OFFLINE, 0);
+	switch (n->phase) {
+	case CO_PH_CONFIG:
+	case CO_PH_START:
+		state = SP_DRIVE_CONFIGURING;
+		break;
+	case CO_PH_OPERATIONAL:
+		if (n->fault && n->error_code == CO_ERR_HEARTBEAT && !n->hb_armed) {
+			state = SP_DRIVE_OFFLINE;	/* silent */
+			break;
+		}
+		switch (n->state402) {
+		case CO402_NOT_READY: state = SP_DRIVE_NOT_READY; break;
+		case CO402_SWITCH_ON_DISABLED: state = SP_DRIVE_SWITCH_ON_DISABLED; break;
+		case CO402_READY_TO_SWITCH_ON: state = SP_DRIVE_READY; break;
+		case CO402_SWITCHED_ON: state = SP_DRIVE_SWITCHED_ON; break;
+		case CO402_OPERATION_ENABLED: state = SP_DRIVE_OPERATION_ENABLED; break;
+		case CO402_QUICK_STOP_ACTIVE: state = SP_DRIVE_QUICK_STOP; break;
+		case CO402_FAULT_REACTION_ACTIVE: state = SP_DRIVE_FAULT_REACTION; break;
+		case CO402_FAULT: state = SP_DRIVE_FAULT; break;
+		default: state = SP_DRIVE_CONFIGURING; break;	/* no TPDO yet */
+		}
+		break;
+	default:	/* not started, waiting for boot-up, failed */
+		state = SP_DRIVE_OFFLINE;
+		break;
+	}
+	return SP_AX_MAKE_DRIVE(state, n->fault ? n->error_code : 0u);
+}
+
+const struct axis_ops axis_can_ops = {
+	.name = "can",
+	.init = can_init,
+	.safestop = can_safestop,
+	.resume = can_resume,
+	.cycle = can_cycle,
+	.drive = can_drive,
+};
+
+int axis_can_get_stats(uint32_t b, struct axis_can_stats *out)
+{
+	uint32_t flags;
+
+	if (b >= NBUS || !bus[b].ok)
+		return -1;
+	flags = irq_save();
+	co_master_stats(&bus[b].m, &out->co);
+	canps_get_stats(&bus[b].dev, &out->can);
+	irq_restore(flags);
+	return 0;
+}
+
+void axis_can_log_stats(void)
+{
+	struct axis_can_stats s;
+
+	for (uint32_t b = 0; b < NBUS; b++) {
+		if (axis_can_get_stats(b, &s))
+			continue;
+		log_printf("stats can=%u nodes_op=%u sync=%u sync_missed=%u rpdo=%u rpdo_missed=%u tpdo=%u "
+			   "pdo_missing=%u pdo_missing_max=%u emcy=%u hb_timeouts=%u faults=%u sdo_ok=%u "
+			   "sdo_fail=%u rx_bad=%u\n",
+			   (unsigned)b, (unsigned)s.co.nodes_operational, (unsigned)s.co.sync_sent,
+			   (unsigned)s.co.sync_missed, (unsigned)s.co.rpdo_sent, (unsigned)s.co.rpdo_missed,
+			   (unsigned)s.co.tpdo_rx, (unsigned)s.co.pdo_missing, (unsigned)s.co.pdo_missing_max,
+			   (unsigned)s.co.emcy, (unsigned)s.co.hb_timeouts, (unsigned)s.co.faults,
+			   (unsigned)s.co.sdo_ok, (unsigned)(s.co.sdo_abort + s.co.sdo_timeout + s.co.sdo_bad),
+			   (unsigned)s.co.rx_bad);
+		log_printf("stats canps=%u tx=%u tx_busy=%u rx=%u rx_dropped=%u rx_fifo_overflow=%u ring_max=%u "
+			   "irqs=%u errors=%u tec=%u rec=%u error_passive=%u bus_off=%u recoveries=%u\n",
+			   (unsigned)b, (unsigned)s.can.tx_frames, (unsigned)s.can.tx_busy,
+			   (unsigned)s.can.rx_frames, (unsigned)s.can.rx_dropped,
+			   (unsigned)s.can.rx_fifo_overflow, (unsigned)s.can.ring_max, (unsigned)s.can.irqs,
+			   (unsigned)s.can.error_irqs, (unsigned)s.can.tec, (unsigned)s.can.rec,
+			   (unsigned)s.can.error_passive, (unsigned)s.can.bus_off,
+			   (unsigned)s.can.bus_off_recoveries);
+	}
+}

@@ -1,0 +1,138 @@
+# SPDX-License-Identifier: MIT
+"""The servo firmware as CANopen master in QEMU, without Linux (issue 22,
+item 4): the firmware built for boards/zynq7000_qemu/servo-can.dts (its
+four axes on CiA 402 drives, two per bus) runs on CPU1, its CAN buses are
+linked in lockstep to the drive simulator on the host (can-host-lockstep,
+docs/canlink.md; servoamp-drivesim), and the axes are enabled through the
+firmware's debug hook (app_debug.force_enable, written through the
+gdbstub: without Linux nobody sends commands). Each drive must go through
+NMT, the SDO configuration and the CiA 402 enable sequence to "operation
+enabled", with no SYNC missed.
+
+Needs a QEMU with the can-host-lockstep backend ($SERVOAMP_QEMU, else the
+project's build) and the drive simulator; skipped otherwise."""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from qemu_rpu import QemuRpu, _symbol
+from rpu_common import BOARD, REPO, _make
+
+CAN_DTS = REPO / "boards" / BOARD / "servo-can.dts"
+CAN_STATS_RE = (r"^stats can={bus} nodes_op=(\d+) sync=(\d+) sync_missed=(\d+) rpdo=(\d+) rpdo_missed=(\d+) "
+                r"tpdo=(\d+) pdo_missing=(\d+) pdo_missing_max=(\d+) emcy=(\d+) hb_timeouts=(\d+) "
+                r"faults=(\d+) sdo_ok=(\d+) sdo_fail=(\d+) rx_bad=(\d+)$")
+
+
+def canlink_qemu() -> str:
+    """The QEMU binary with the canlink backend, or skip."""
+    from servoamp import qemu
+
+    binary = os.environ.get("SERVOAMP_QEMU") or str(qemu.project_qemu() / "bin" / "qemu-system-arm")
+    if not os.access(binary, os.X_OK):
+        pytest.skip(f"{binary}: no QEMU")
+    out = subprocess.run([binary, "-object", "help"], capture_output=True, text=True, timeout=60).stdout
+    if "can-host-lockstep" not in out:
+        pytest.skip(f"{binary} has no can-host-lockstep backend (docs/canlink.md)")
+    return binary
+
+
+def drivesim_ok() -> None:
+    try:
+        import servoamp.drivesim.__main__  # noqa: F401
+    except ImportError as e:
+        pytest.skip(f"no drive simulator: {e}")
+
+
+@pytest.fixture(scope="module")
+def can_build(tmp_path_factory, toolchain) -> Path:
+    build = tmp_path_factory.mktemp("rpu_can") / BOARD
+    r = _make(build, f"DTS={CAN_DTS}")
+    assert r.returncode == 0, f"make failed:\n{r.stdout}\n{r.stderr}"
+    return build
+
+
+def test_can_build_links_the_master(can_build):
+    """The CAN variant builds; its board config puts the 4 axes on drives."""
+    hdr = (can_build / "board_config.h").read_text()
+    assert "#define BOARD_CAN_AXES BOARD_U(4)" in hdr
+    for sym in ("co_master_cycle", "canps_irq", "axis_can_ops", "app_debug"):
+        _symbol(can_build / "servo.elf", sym)
+
+
+def _run(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monkeypatch) -> str:
+    monkeypatch.setenv("SERVOAMP_QEMU", canlink_qemu())
+    drivesim_ok()
+    sockdir = Path(tempfile.mkdtemp(prefix="rpucan-"))
+    sims = []
+    try:
+        links = {}
+        for b in buses:
+            sock = sockdir / f"can{b}.sock"
+            links[b] = sock
+            log = open(tmp_path / f"drivesim{b}.log", "w")
+            sims.append(subprocess.Popen([sys.executable, "-m", "servoamp.drivesim", "--socket", str(sock),
+                                          "--nodes", "1,2"], stdout=log, stderr=subprocess.STDOUT,
+                                         cwd=REPO))
+        elf = can_build / "servo.elf"
+        with QemuRpu(tmp_path / "q", can_build / "qemu-stub.elf", elf, can_links=links,
+                     can_link_opts={"timeout-ms": 2000}) as q:
+            q.wait_uart(r"^running:", timeout=30)
+            for b in buses:
+                q.wait_uart(rf"^can{b}: controller e000{8 + b}000 irq", timeout=5)
+            g = q.attach_gdb()
+            g.interrupt()
+            g.select_cpu(0)
+            g.write32(_symbol(elf, "app_debug"), axes_mask)
+            g.cont()
+            for i in range(4):
+                if axes_mask & (1 << i):
+                    b, node = divmod(i, 2)
+                    q.wait_uart(rf"^axis{i}: can{b} node {node + 1}: operation enabled, error 0000$", timeout=90)
+            # two statistics intervals with every drive enabled
+            n0 = len(re.findall(r"^stats cycle=", q.uart_text(), re.M))
+            q.wait_uart(r"^stats cycle=", count=n0 + 2, timeout=60)
+            text = q.uart_text()
+            for b in buses:
+                st = [tuple(map(int, m.groups())) for m in re.finditer(CAN_STATS_RE.format(bus=b), text, re.M)]
+                assert st, text[-3000:]
+                nodes_op, sync, sync_missed, rpdo, _, tpdo, pdo_missing, _, emcy, hb_to, faults, sdo_ok, \
+                    sdo_fail, rx_bad = st[-1]
+                assert nodes_op == 2, st[-1]
+                assert sync_missed == 0 and sync > 1000
+                assert emcy == 0 and hb_to == 0 and faults == 0 and sdo_fail == 0 and rx_bad == 0, st[-1]
+                assert sdo_ok == 2 * 13
+                # after start-up every SYNC is answered by both drives
+                prev = st[-2]
+                assert st[-1][6] == prev[6], f"TPDOs missing between the last two intervals: {prev} {st[-1]}"
+                assert tpdo > 0 and rpdo > 0
+            assert "FAULT" not in text
+            return text
+    finally:
+        for s in sims:
+            s.terminate()
+            try:
+                s.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                s.kill()
+        shutil.rmtree(sockdir, ignore_errors=True)
+
+
+def test_two_can_axes_operation_enabled(can_build, tmp_path, monkeypatch):
+    """CAN0 linked to two simulated drives (nodes 1 and 2): axes 0 and 1
+    reach operation enabled; CAN1 is left without drives."""
+    text = _run(can_build, tmp_path, [0], 0x3, monkeypatch)
+    print("\n".join(line for line in text.splitlines() if line.startswith(("axis", "can", "stats can"))))
+
+
+def test_four_can_axes_two_per_bus(can_build, tmp_path, monkeypatch):
+    """Both buses, two drives each: all four axes reach operation enabled."""
+    _run(can_build, tmp_path, [0, 1], 0xF, monkeypatch)
