@@ -248,9 +248,9 @@ static void log_changes(uint32_t i, const struct co_node *n)
 			   (unsigned)a->node, co_402_name((enum co_402_state)n->state402),
 			   n->fault ? ", fault," : ",", (unsigned)n->error_code);
 	else
-		log_printf("axis%u: can%u node %u: phase %u%s error %04x\n", (unsigned)i, (unsigned)a->bus,
-			   (unsigned)a->node, (unsigned)n->phase, n->fault ? ", fault," : ",",
-			   (unsigned)n->error_code);
+		log_printf("axis%u: can%u node %u: %s%s error %04x\n", (unsigned)i, (unsigned)a->bus,
+			   (unsigned)a->node, co_phase_name((enum co_node_phase)n->phase),
+			   n->fault ? ", fault," : ",", (unsigned)n->error_code);
 }
 
 static void can_cycle(uint32_t i, const struct axis_params *k, const struct axis_in *in,

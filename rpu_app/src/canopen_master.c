@@ -148,6 +148,20 @@ const char *co_402_name(enum co_402_state s)
 	}
 }
 
+const char *co_phase_name(enum co_node_phase p)
+{
+	switch (p) {
+	case CO_PH_IDLE: return "idle";
+	case CO_PH_RESET: return "nmt reset";
+	case CO_PH_BOOT_WAIT: return "waiting for boot-up";
+	case CO_PH_CONFIG: return "sdo configuration";
+	case CO_PH_START: return "nmt start";
+	case CO_PH_OPERATIONAL: return "operational";
+	case CO_PH_FAILED: return "failed";
+	default: return "unknown";
+	}
+}
+
 int co_master_init(struct co_master *m, co_send_fn send, void *ctx, const struct co_config *cfg,
 		   const uint8_t *node_ids, uint32_t n_nodes)
 {

@@ -178,5 +178,6 @@ void co_master_stats(const struct co_master *m, struct co_stats *out);
 
 enum co_402_state co_402_decode(uint16_t statusword);
 const char *co_402_name(enum co_402_state s);
+const char *co_phase_name(enum co_node_phase p);
 
 #endif

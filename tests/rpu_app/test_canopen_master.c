@@ -356,6 +356,7 @@ static void test_init_checks(void)
 	CHECK_EQ(co_402_decode(0x0217), CO402_QUICK_STOP_ACTIVE);
 	CHECK_EQ(co_402_decode(0x0000), CO402_NOT_READY);
 	CHECK(strcmp(co_402_name(CO402_OPERATION_ENABLED), "operation enabled") == 0);
+	CHECK(strcmp(co_phase_name(CO_PH_FAILED), "failed") == 0);
 }
 
 /* Start-up to operation enabled, the configuration written, the PDOs. */
