@@ -31,6 +31,7 @@
 #include "canopen_master.h"
 #include "canps.h"
 #include "arch.h"
+#include "gtimer.h"
 #include "irq.h"
 #include "log.h"
 
@@ -76,6 +77,18 @@ static int32_t to_i32(float v)
 	if (v < -2147483000.0f)
 		return -2147483647;
 	return (int32_t)(v + (v >= 0.0f ? 0.5f : -0.5f));
+}
+
+/* a - b without overflow (positions come from the bus: any value). */
+static int32_t sat_diff(int32_t a, int32_t b)
+{
+	int64_t d = (int64_t)a - (int64_t)b;
+
+	if (d > INT32_MAX)
+		return INT32_MAX;
+	if (d < -INT32_MAX)
+		return -INT32_MAX;
+	return (int32_t)d;
 }
 
 static int send_frame(void *ctx, const struct can_frame *f)
@@ -243,14 +256,13 @@ static void log_changes(uint32_t i, const struct co_node *n)
 	a->last_state = n->state402;
 	a->last_fault = n->fault;
 	a->last_error = n->error_code;
-	if (n->phase == CO_PH_OPERATIONAL)
-		log_printf("axis%u: can%u node %u: %s%s error %04x\n", (unsigned)i, (unsigned)a->bus,
-			   (unsigned)a->node, co_402_name((enum co_402_state)n->state402),
-			   n->fault ? ", fault," : ",", (unsigned)n->error_code);
-	else
-		log_printf("axis%u: can%u node %u: %s%s error %04x\n", (unsigned)i, (unsigned)a->bus,
-			   (unsigned)a->node, co_phase_name((enum co_node_phase)n->phase),
-			   n->fault ? ", fault," : ",", (unsigned)n->error_code);
+	/* what, then where in time: the master's cycle and the global timer */
+	log_printf("axis%u: can%u node %u: %s%s error %04x (cycle %u, t_us %u)\n", (unsigned)i,
+		   (unsigned)a->bus, (unsigned)a->node,
+		   n->phase == CO_PH_OPERATIONAL ? co_402_name((enum co_402_state)n->state402)
+						 : co_phase_name((enum co_node_phase)n->phase),
+		   n->fault ? ", fault," : ",", (unsigned)n->error_code, (unsigned)bus[a->bus].m.cycle,
+		   (unsigned)(gtimer_now() / BOARD_GTIMER_TICKS_PER_US));
 }
 
 static void can_cycle(uint32_t i, const struct axis_params *k, const struct axis_in *in,
@@ -306,7 +318,7 @@ static void can_cycle(uint32_t i, const struct axis_params *k, const struct axis
 	    in->mode == AXIS_ENABLED)
 		st |= SP_AX_ENABLED;
 	if (a->prev_valid) {
-		a->vel = to_i32((float)(pos - a->prev_pos) / k->T);
+		a->vel = to_i32((float)sat_diff(pos, a->prev_pos) / k->T);
 		if (pos == a->prev_pos)
 			st |= SP_AX_STANDSTILL;
 	} else {
@@ -320,7 +332,7 @@ static void can_cycle(uint32_t i, const struct axis_params *k, const struct axis
 	fb->actual_pos = pos;
 	fb->actual_vel = a->vel;
 	fb->current = 0;	/* not mapped in TPDO1 */
-	fb->following_error = (st & SP_AX_ENABLED) ? a->p1 - pos : 0;
+	fb->following_error = (st & SP_AX_ENABLED) ? sat_diff(a->p1, pos) : 0;
 	log_changes(i, n);
 }
 

@@ -13,6 +13,7 @@ Needs a QEMU with the can-host-lockstep backend ($SERVOAMP_QEMU, else the
 project's build) and the drive simulator; skipped otherwise."""
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
@@ -88,12 +89,20 @@ def test_can_firmware_without_drives(can_build, tmp_path):
             return  # a QEMU without the CAN controllers: the axes stay offline
         for i in range(4):
             b, node = divmod(i, 2)
-            q.wait_uart(rf"^axis{i}: can{b} node {node + 1}: failed, fault, error ff01$", timeout=30)
+            q.wait_uart(rf"^axis{i}: can{b} node {node + 1}: failed, fault, error ff01 \(cycle \d+, t_us \d+\)$", timeout=30)
         st = re.findall(r"^stats can=0 nodes_op=(\d+) sync=(\d+) sync_missed=(\d+)", q.uart_text(), re.M)
         assert st and int(st[-1][0]) == 0 and int(st[-1][2]) == 0
 
 
-def _run(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monkeypatch) -> str:
+LINE_RE = r"^axis{i}: can{b} node {node}: {what}, error {err} \(cycle (\d+), t_us (\d+)\)$"
+
+
+@contextlib.contextmanager
+def _rig(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monkeypatch,
+         sim_args: tuple[str, ...] = ()):
+    """The CAN firmware in QEMU, ``buses`` linked to a drive simulator each
+    (nodes 1 and 2), the axes of ``axes_mask`` enabled and seen in
+    operation enabled."""
     monkeypatch.setenv("SERVOAMP_QEMU", canlink_qemu())
     drivesim_ok()
     sockdir = Path(tempfile.mkdtemp(prefix="rpucan-"))
@@ -105,8 +114,8 @@ def _run(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monk
             links[b] = sock
             log = open(tmp_path / f"drivesim{b}.log", "w")
             sims.append(subprocess.Popen([sys.executable, "-m", "servoamp.drivesim", "--socket", str(sock),
-                                          "--nodes", "1,2"], stdout=log, stderr=subprocess.STDOUT,
-                                         cwd=REPO))
+                                          "--nodes", "1,2", *sim_args], stdout=log,
+                                         stderr=subprocess.STDOUT, cwd=REPO))
         elf = can_build / "servo.elf"
         with QemuRpu(tmp_path / "q", can_build / "qemu-stub.elf", elf, can_links=links,
                      can_link_opts={"timeout-ms": 2000}) as q:
@@ -121,26 +130,9 @@ def _run(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monk
             for i in range(4):
                 if axes_mask & (1 << i):
                     b, node = divmod(i, 2)
-                    q.wait_uart(rf"^axis{i}: can{b} node {node + 1}: operation enabled, error 0000$", timeout=90)
-            # two statistics intervals with every drive enabled
-            n0 = len(re.findall(r"^stats cycle=", q.uart_text(), re.M))
-            q.wait_uart(r"^stats cycle=", count=n0 + 2, timeout=60)
-            text = q.uart_text()
-            for b in buses:
-                st = [tuple(map(int, m.groups())) for m in re.finditer(CAN_STATS_RE.format(bus=b), text, re.M)]
-                assert st, text[-3000:]
-                nodes_op, sync, sync_missed, rpdo, _, tpdo, pdo_missing, _, emcy, hb_to, faults, sdo_ok, \
-                    sdo_fail, rx_bad = st[-1]
-                assert nodes_op == 2, st[-1]
-                assert sync_missed == 0 and sync > 1000
-                assert emcy == 0 and hb_to == 0 and faults == 0 and sdo_fail == 0 and rx_bad == 0, st[-1]
-                assert sdo_ok == 2 * 13
-                # after start-up every SYNC is answered by both drives
-                prev = st[-2]
-                assert st[-1][6] == prev[6], f"TPDOs missing between the last two intervals: {prev} {st[-1]}"
-                assert tpdo > 0 and rpdo > 0
-            assert "FAULT" not in text
-            return text
+                    q.wait_uart(LINE_RE.format(i=i, b=b, node=node + 1, what="operation enabled", err="0000"),
+                                timeout=90)
+            yield q
     finally:
         for s in sims:
             s.terminate()
@@ -149,6 +141,28 @@ def _run(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monk
             except subprocess.TimeoutExpired:
                 s.kill()
         shutil.rmtree(sockdir, ignore_errors=True)
+
+
+def _run(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monkeypatch) -> str:
+    with _rig(can_build, tmp_path, buses, axes_mask, monkeypatch) as q:
+        # two statistics intervals with every drive enabled
+        n0 = len(re.findall(r"^stats cycle=", q.uart_text(), re.M))
+        q.wait_uart(r"^stats cycle=", count=n0 + 2, timeout=60)
+        text = q.uart_text()
+        for b in buses:
+            st = [tuple(map(int, m.groups())) for m in re.finditer(CAN_STATS_RE.format(bus=b), text, re.M)]
+            assert len(st) >= 2, text[-3000:]
+            nodes_op, sync, sync_missed, rpdo, _, tpdo, pdo_missing, _, emcy, hb_to, faults, sdo_ok, \
+                sdo_fail, rx_bad = st[-1]
+            assert nodes_op == 2, st[-1]
+            assert sync_missed == 0 and sync > 1000
+            assert emcy == 0 and hb_to == 0 and faults == 0 and sdo_fail == 0 and rx_bad == 0, st[-1]
+            assert sdo_ok == 2 * 13
+            # after start-up every SYNC is answered by both drives
+            assert st[-1][6] == st[-2][6], f"TPDOs missing between the last two intervals: {st[-2]} {st[-1]}"
+            assert tpdo > 0 and rpdo > 0
+        assert "FAULT" not in text
+        return text
 
 
 def test_two_can_axes_operation_enabled(can_build, tmp_path, monkeypatch):
@@ -161,3 +175,20 @@ def test_two_can_axes_operation_enabled(can_build, tmp_path, monkeypatch):
 def test_four_can_axes_two_per_bus(can_build, tmp_path, monkeypatch):
     """Both buses, two drives each: all four axes reach operation enabled."""
     _run(can_build, tmp_path, [0, 1], 0xF, monkeypatch)
+
+
+def test_drive_faults_reach_the_axis(can_build, tmp_path, monkeypatch):
+    """Faults injected in the simulated drives (guest time): node 2's
+    over-current becomes axis 1's fault with the drive's EMCY code 0x2310
+    within 2 cycles; node 1 dropping off the bus is caught by the heartbeat
+    consumer (60 ms, producer 20 ms) as 0x8130."""
+    t_oc, t_off = 1.5, 2.0
+    with _rig(can_build, tmp_path, [0], 0x3, monkeypatch,
+              ("--fault", f"2:over-current@{t_oc}", "--fault", f"1:off-bus@{t_off}")) as q:
+        oc = q.wait_uart(LINE_RE.format(i=1, b=0, node=2, what=r"[a-z ]+, fault", err="2310"), timeout=90)[0]
+        off = q.wait_uart(LINE_RE.format(i=0, b=0, node=1, what=r"[a-z ]+, fault", err="8130"), timeout=90)[0]
+        t1, t0 = int(oc.group(2)), int(off.group(2))
+        print(f"over-current seen at t_us {t1} (injected {t_oc * 1e6:.0f}); silence caught at t_us {t0} "
+              f"(injected {t_off * 1e6:.0f})")
+        assert 0 <= t1 - t_oc * 1e6 <= 2_000 + 1_000
+        assert 40_000 <= t0 - t_off * 1e6 <= 60_000 + 1_000 + 1_000
