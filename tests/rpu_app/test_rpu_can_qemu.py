@@ -114,7 +114,7 @@ def _rig(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monk
             links[b] = sock
             log = open(tmp_path / f"drivesim{b}.log", "w")
             sims.append(subprocess.Popen([sys.executable, "-m", "servoamp.drivesim", "--socket", str(sock),
-                                          "--nodes", "1,2", *sim_args], stdout=log,
+                                          "--nodes", "1,2", "--wait", "120", "-v", *sim_args], stdout=log,
                                          stderr=subprocess.STDOUT, cwd=REPO))
         elf = can_build / "servo.elf"
         with QemuRpu(tmp_path / "q", can_build / "qemu-stub.elf", elf, can_links=links,
@@ -182,11 +182,15 @@ def test_drive_faults_reach_the_axis(can_build, tmp_path, monkeypatch):
     over-current becomes axis 1's fault with the drive's EMCY code 0x2310
     within 2 cycles; node 1 dropping off the bus is caught by the heartbeat
     consumer (60 ms, producer 20 ms) as 0x8130."""
-    t_oc, t_off = 1.5, 2.0
+    t_oc, t_off = 20.0, 20.5
     with _rig(can_build, tmp_path, [0], 0x3, monkeypatch,
               ("--fault", f"2:over-current@{t_oc}", "--fault", f"1:off-bus@{t_off}")) as q:
-        oc = q.wait_uart(LINE_RE.format(i=1, b=0, node=2, what=r"[a-z ]+, fault", err="2310"), timeout=90)[0]
-        off = q.wait_uart(LINE_RE.format(i=0, b=0, node=1, what=r"[a-z ]+, fault", err="8130"), timeout=90)[0]
+        en = [int(m.group(2)) for m in re.finditer(LINE_RE.format(i=r"\d", b=0, node=r"\d",
+                                                                 what="operation enabled", err="0000"),
+                                                   q.uart_text(), re.M)]
+        assert max(en) < t_oc * 1e6, f"drives enabled only at t_us {en}: after the injections"
+        oc = q.wait_uart(LINE_RE.format(i=1, b=0, node=2, what=r"[a-z ]+, fault", err="2310"), timeout=180)[0]
+        off = q.wait_uart(LINE_RE.format(i=0, b=0, node=1, what=r"[a-z ]+, fault", err="8130"), timeout=180)[0]
         t1, t0 = int(oc.group(2)), int(off.group(2))
         print(f"over-current seen at t_us {t1} (injected {t_oc * 1e6:.0f}); silence caught at t_us {t0} "
               f"(injected {t_off * 1e6:.0f})")
