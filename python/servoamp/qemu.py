@@ -132,11 +132,34 @@ def _run(cmd: Sequence[str | Path], **kw: Any) -> subprocess.CompletedProcess[st
     return res
 
 
-def kernel_dir() -> Path:
-    """The kernel build (``build/kernel`` -> cache), built if missing."""
-    link = REPO / "build" / "kernel"
+KERNELS = ("default", "rt")
+
+
+def default_kernel() -> str:
+    """The kernel variant the board boots: ``default`` (non-preemptible
+    6.1) or ``rt`` (PREEMPT_RT, linux/kernel/build.sh --variant rt), from
+    $SERVOAMP_KERNEL (``west emu --kernel`` sets it); default: ``default``."""
+    kernel = os.environ.get("SERVOAMP_KERNEL") or "default"
+    if kernel not in KERNELS:
+        raise QemuError(f"SERVOAMP_KERNEL={kernel}: expected one of {', '.join(KERNELS)}")
+    return kernel
+
+
+def kernel_link(kernel: str | None = None) -> Path:
+    """``build/kernel`` (default) or ``build/kernel-rt``: the link to the
+    variant's cached build (linux/kernel/build.sh)."""
+    kernel = kernel or default_kernel()
+    return REPO / "build" / ("kernel" if kernel == "default" else f"kernel-{kernel}")
+
+
+def kernel_dir(kernel: str | None = None) -> Path:
+    """The kernel build of variant ``kernel`` (default:
+    :func:`default_kernel`; ``build/kernel[-rt]`` -> cache), built if
+    missing."""
+    kernel = kernel or default_kernel()
+    link = kernel_link(kernel)
     if not (link / "ok").exists():
-        subprocess.run([REPO / "linux/kernel/build.sh"], check=True)
+        subprocess.run([REPO / "linux/kernel/build.sh", "--variant", kernel], check=True)
     return link.resolve()
 
 
@@ -959,7 +982,7 @@ def _symbol_files(cpu: int) -> list[Path]:
     """Where an address of ``cpu`` may come from: CPU0 runs Linux (vmlinux)
     and servod; CPU1 the servo firmware (its ELF) or the boot stub."""
     if cpu == 0:
-        return [REPO / "build/kernel/obj/vmlinux", REPO / "build/linux/servod/servod"]
+        return [kernel_link() / "obj/vmlinux", REPO / "build/linux/servod/servod"]
     return sorted((REPO / "build/rpu_app").glob("*/servo.elf"))
 
 
@@ -1019,7 +1042,7 @@ def vcpu_report(machine: QemuMachine, reason: str) -> str:
                 lines.extend(hits[:40])
         # the kernel's clock as Linux sees it: jiffies stands still across
         # the two snapshots when CPU0's tick no longer arrives
-        vmlinux = REPO / "build/kernel/obj/vmlinux"
+        vmlinux = kernel_link() / "obj/vmlinux"
         if vmlinux.exists():
             nm = shutil.which("arm-linux-gnueabihf-nm") or "nm"
             res = subprocess.run([nm, str(vmlinux)], text=True, capture_output=True)

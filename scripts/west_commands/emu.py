@@ -4,14 +4,17 @@
     west emu -c 'cat /proc/cpuinfo'  # scripted: boot, run, print, quit
     west emu --script cmds.sh        # scripted, one shell command a line
     west emu --build-only            # just build/refresh the images
+    west emu --kernel rt             # boot the PREEMPT_RT kernel (build.sh --variant rt)
     west emu --net                   # with guest networking (eth0 up, servod's
                                      # telemetry port forwarded to 127.0.0.1)
 
 What it builds (each step is cached and costs about a second when nothing
 changed): the kernel (linux/kernel/build.sh, cached by source version +
-config fragment), the remoteproc module, rpu_app (its Makefile, when it
-exists), the test firmware (tests/robot/fixtures), the initramfs, the boot
-stub and the DTB. The board's numbers come from boards/<board>/board.yaml.
+config fragment; with --kernel rt or SERVOAMP_KERNEL=rt the PREEMPT_RT
+variant, cached by source + RT patch series + fragments), the remoteproc
+module, rpu_app (its Makefile, when it exists), the test firmware
+(tests/robot/fixtures), the initramfs, the boot stub and the DTB. The
+board's numbers come from boards/<board>/board.yaml.
 
 Interactive mode: UART0 (the Linux console) and the QEMU monitor share this
 terminal (Ctrl-A c switches to the monitor, Ctrl-A x quits); UART1 (the
@@ -35,6 +38,7 @@ Also runs without a west workspace: ``.venv/bin/python scripts/west_commands/emu
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -57,6 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("--icount", default=None, metavar="SPEC",
                         help="virtual time with this -icount value instead of the board's "
                              "(one instruction = 2^shift ns)")
+    parser.add_argument("--kernel", choices=qemu.KERNELS, default=None,
+                        help="kernel variant: default (non-preemptible 6.1) or rt (PREEMPT_RT); "
+                             "default: $SERVOAMP_KERNEL, else default")
     parser.add_argument("--firmware", action="append", type=Path, default=None, metavar="ELF",
                         help="ELF to put in /lib/firmware (repeatable; default: test fixtures + rpu_app)")
     parser.add_argument("--no-rpu-app", action="store_true", help="do not build or include rpu_app")
@@ -90,6 +97,10 @@ def net_args(board: qemu.Board, port: int | None) -> tuple[list[str], int | None
 
 def run(args: argparse.Namespace) -> int:
     board = qemu.Board.load(args.board)
+    if args.kernel:
+        # the launcher (kernel_dir(), the vmlinux of the register dumps) follows it
+        os.environ["SERVOAMP_KERNEL"] = args.kernel
+    print(f"[emu] kernel: {qemu.default_kernel()}")
     t0 = time.monotonic()
     images = qemu.prepare_images(board, args.firmware, with_rpu_app=not args.no_rpu_app)
     print(f"[emu] images ready in {time.monotonic() - t0:.1f} s")
