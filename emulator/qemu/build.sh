@@ -21,7 +21,7 @@
 #   qemu-src/qemu_10.0.2+ds.orig.tar.xz   downloaded once (shared)
 #   qemu-src/apt/                         the private APT state
 #   qemu/<key>/bin/qemu-system-arm        the install (prefix)
-#   qemu/<key>/libexec/servoamp/          the qtest binaries (TTC, CAN)
+#   qemu/<key>/libexec/servoamp/          the qtest binaries (TTC, CAN, canlink)
 #   qemu/<key>/info, build.log, ok        results (ok = complete, the
 #                                         qtests passed)
 #   qemu/<key>/src, build                 patched source and build tree, removed
@@ -70,7 +70,7 @@ config_opts=(
 	--disable-user
 )
 # ninja targets: the emulator, what `meson install` needs, our qtests
-qtests=(cadence-ttc-test zynq-can-test)
+qtests=(cadence-ttc-test zynq-can-test can-lockstep-test)
 targets=(qemu-system-arm trace/trace-events-all "${qtests[@]/#/tests/qtest/}")
 
 log() { printf '[qemu] %s\n' "$*" >&2; }

@@ -2,7 +2,9 @@
 # Run one of our qtests against a QEMU: the Cadence TTC regression qtest
 # (patches/0002, tests/qtest/cadence-ttc-test.c) by default, or with
 # --test zynq-can-test the CAN controllers' (patches/0008,
-# tests/qtest/zynq-can-test.c). Exits 0 when it passes, 1 when it fails,
+# tests/qtest/zynq-can-test.c), or with --test can-lockstep-test the
+# canlink backend's (patches/0010, tests/qtest/can-lockstep-test.c).
+# Exits 0 when it passes, 1 when it fails,
 # 124 when it times out (the unpatched TTC model livelocks in clock_step, so
 # a hang is the expected failure there).
 #
@@ -13,6 +15,7 @@
 #                                                         # qemu-system-arm, e.g. Debian's unpatched
 #                                                         # /usr/bin/qemu-system-arm (same 10.0.2)
 #   emulator/qemu/run-regression-test.sh [DIR] --test zynq-can-test
+#   emulator/qemu/run-regression-test.sh [DIR] --test can-lockstep-test
 #
 # Environment: SERVOAMP_QEMU_TEST_TIMEOUT (seconds, default 60; the test takes
 # about 2 s on a fixed QEMU).
@@ -27,7 +30,7 @@ while [ $# -gt 0 ]; do
 	case $1 in
 	--qemu) qemu=${2:?--qemu needs a path}; shift 2 ;;
 	--test) test=${2:?--test needs a name}; shift 2 ;;
-	-h | --help) sed -n '2,19p' "$0"; exit 0 ;;
+	-h | --help) sed -n '2,22p' "$0"; exit 0 ;;
 	*) [ -z "$dir" ] || die "one directory only"; dir=$1; shift ;;
 	esac
 done
@@ -36,7 +39,7 @@ dir=$(cd "$dir" && pwd)
 
 test_bin=""
 case $test in
-*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test)" ;;
+*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test, can-lockstep-test)" ;;
 esac
 for t in "$dir/libexec/servoamp/$test" "$dir/tests/qtest/$test"; do
 	[ -x "$t" ] && { test_bin=$t; break; }
