@@ -212,6 +212,8 @@ def test_firmware_failing_after_every_attach_is_latched(cb: netboard.ControllerB
     assert "after the operator's fault reset" in cb.sh(f"grep 'recovery complete' {LOG} | tail -n 1")
     st = cb.ampctl("status")
     assert "latched=0" in st and "link=attached" in st
+    # the default board's axes are the firmware's internal models (no CAN drive)
+    assert "axis0.drive=internal axis0.error=0x0000" in st, st
     d = cb.stats()
     cb.sh("sleep 0.5")
     e = cb.stats()
