@@ -89,7 +89,7 @@ class Board:
             [binary, "-machine", "xilinx-zynq-a9,canbus0=canbus0", "-object", "can-bus,id=canbus0",
              "-object", f"can-host-lockstep,id=cl0,canbus=canbus0,path={self.can_sock},"
                         f"bitrate={bitrate},timeout-ms={timeout_ms}",
-             "-accel", "qtest", "-qtest", f"unix:{qtest_sock}", "-display", "none",
+             "-accel", "qtest", "-qtest", f"unix:{qtest_sock}", "-qtest-log", "/dev/null", "-display", "none",
              "-nodefaults", "-serial", "null", "-monitor", "none"],
             stdout=self.log, stderr=subprocess.STDOUT)
         self.conn, _ = self.listener.accept()
@@ -160,8 +160,10 @@ class Board:
         return out
 
     def close(self) -> int:
-        """End QEMU (closing qtest makes it quit; it says BYE to the canlink
-        clients); its exit status."""
+        """End QEMU as libqtest does (SIGTERM: it quits cleanly and says BYE
+        to the canlink clients); its exit status."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
         try:
             self.conn.close()
             self.rfile.close()

@@ -155,21 +155,21 @@ def test_master_enables_drives_moves_them_and_sees_their_faults(rig, tmp_path: P
     emcys: dict[int, list[tuple[int, int, int]]] = {n: [] for n in NODES}
     heartbeats: dict[int, list[int]] = {n: [] for n in NODES}
     target = {n: 0 for n in NODES}
-    followed: dict[int, list[tuple[int, int]]] = {n: [] for n in NODES}
+    followed: dict[int, list[tuple[int, int, int]]] = {n: [] for n in NODES}
     k = 0
     while t < 0.260e9:
         if k < 3:
             cw = (0x06, 0x07, 0x0F)[k]
         else:
             cw = 0x0F
-            for n in NODES:
-                target[n] = 30 * (k - 3) * n
+            for n in NODES:      # speed up to 30 * n counts/ms over 40 ms
+                target[n] += 30 * n * min(k - 3, 40) // 40
         got = cycle(board, t, [rpdo1(n, cw, target[n]) for n in NODES] + [(0x080, b"")])
         for f in got:
             n = f.can_id & 0x7F
             if f.can_id - n == 0x180:
                 status[n], position[n] = tpdo1(f.data)
-                followed[n].append((target[n], position[n]))
+                followed[n].append((t, target[n], position[n]))
             elif f.can_id - n == 0x80:
                 code, reg = emcy(f.data)
                 emcys[n].append((t, code, reg))
@@ -182,9 +182,11 @@ def test_master_enables_drives_moves_them_and_sees_their_faults(rig, tmp_path: P
 
     # positions followed the targets while enabled, before the faults
     for n in NODES:
-        moving = [(tg, pos) for tg, pos in followed[n][6:140]]
-        assert moving and moving[-1][0] > 1000 * n
-        assert all(abs(tg - pos) < 300 * n for tg, pos in moving), moving[-10:]
+        until = (FE_AT_S if n == FE_NODE else OC_AT_S) * 1e9
+        moving = [(tg, pos) for tc, tg, pos in followed[n] if tc < until]
+        assert moving[-1][0] > 3000 * n and moving[-1][1] > 3000 * n
+        # TPDO1's position is sampled at the SYNC, before the target sent with it
+        assert all(abs(tg - pos) < 100 * n for tg, pos in moving), moving
     # the faults: EMCY with the code, at the guest time injected (within the
     # following-error timeout and a few cycles for the jam)
     assert [(c, r) for _, c, r in emcys[FE_NODE]] == [(0x8611, 0x21)], emcys
