@@ -11,7 +11,8 @@ can-host-lockstep backend to
 The guest brings the drives up as a CANopen master would (boot-up, NMT
 start, SDO 0x6060 = 8, the 402 enable sequence over RPDO + SYNC), moves the
 targets and sees TPDO1 positions follow, then the injected faults come with
-EMCY and their codes at the guest times given. The loggers' files hold
+EMCY and their codes at the guest times given, and a third drive drops off
+the bus (no TPDO, heartbeat or SDO answer after). The loggers' files hold
 every frame; every frame's bus time is its frame_bits at 1 Mbit/s, back to
 back when the bus is busy.
 """
@@ -24,6 +25,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import can
@@ -40,9 +42,13 @@ pytestmark = pytest.mark.board
 REPO = Path(__file__).resolve().parents[2]
 MS = 1_000_000
 BIT_NS = 1000                      # 1 Mbit/s
-NODES = (1, 2)
-FE_NODE, FE_AT_S = 2, 0.150        # node 2's load jams: following error trip
-OC_NODE, OC_AT_S = 1, 0.200        # node 1: over-current
+NODES = (1, 2, 3)
+FE_NODE, FE_AT_S = 2, 0.200        # node 2's load jams: following error trip
+OC_NODE, OC_AT_S = 1, 0.250        # node 1: over-current
+OFF_NODE, OFF_AT_S = 3, 0.120      # node 3 drops off the bus
+RAMP = {1: 30, 2: 60, 3: 0}        # top speed, counts/ms
+T0 = 50 * MS                       # the master starts (after the boot-ups)
+T_END = 310 * MS
 
 
 class Observer:
@@ -108,33 +114,46 @@ def cycle(board: Board, t_ns: int, frames: list[tuple[int, bytes]]) -> list[Gues
     return board.receive_all()
 
 
-def test_master_enables_drives_moves_them_and_sees_their_faults(rig, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
-    board, procs = rig
+@dataclass
+class Run:
+    records: list[canlink.Record]
+    status: dict[int, int]
+    emcys: dict[int, list[tuple[int, int, int]]]
+    heartbeats: dict[int, list[tuple[int, int]]]
+    followed: dict[int, list[tuple[int, int, int]]]
+    tpdo_times: dict[int, list[int]]
+    error_codes: dict[int, int | None]
+
+
+def scenario(board: Board, tmp_path: Path, procs: list[subprocess.Popen[str]],
+             loggers: list[Path]) -> Run:
+    """The master's side, from the drives' boot-up to their faults."""
     observer = Observer(board.can_sock)
     assert observer.link.bitrate == 1_000_000
-    asc, blf = tmp_path / "bus.asc", tmp_path / "bus.blf"
-    procs.append(start_logger(board.can_sock, asc, tmp_path))
-    procs.append(start_logger(board.can_sock, blf, tmp_path))
+    for path in loggers:
+        procs.append(start_logger(board.can_sock, path, tmp_path))
     board.can_init()
-    drivesim_err = open(tmp_path / "drivesim.err", "w")
+    faults = [f"{FE_NODE}:following-error@{FE_AT_S}", f"{OC_NODE}:over-current@{OC_AT_S}",
+              f"{OFF_NODE}:off-bus@{OFF_AT_S}"]
     procs.append(subprocess.Popen(
         [sys.executable, "-m", "servoamp.drivesim", "--socket", str(board.can_sock),
-         "--nodes", ",".join(map(str, NODES)), "-v",
-         "--fault", f"{FE_NODE}:following-error@{FE_AT_S}", "--fault", f"{OC_NODE}:over-current@{OC_AT_S}"],
-        stderr=drivesim_err, text=True, cwd=REPO))
+         "--nodes", ",".join(map(str, NODES)), "-v"] + [a for f in faults for a in ("--fault", f)],
+        stderr=open(tmp_path / "drivesim.err", "w"), text=True, cwd=REPO))
+    drivesim = procs[-1]
 
-    # boot-up: sent by the drives on connecting (outside an exchange)
+    # boot-up: sent by the drives on connecting, outside an exchange, so at
+    # a host-dependent guest time; all that follows starts at T0
     seen: list[GuestFrame] = []
-    deadline = time.monotonic() + 30
     while {f.can_id for f in seen} < {0x700 + n for n in NODES}:
-        assert time.monotonic() < deadline, f"no boot-up: {seen}; {(tmp_path / 'drivesim.err').read_text()}"
+        assert board.now < T0 - MS, f"no boot-up: {seen}; {(tmp_path / 'drivesim.err').read_text()}"
         time.sleep(0.02)
         board.clock_step(100_000)
         seen += board.receive_all()
-    assert all(f.data == b"\x00" for f in seen if f.can_id in (0x701, 0x702))
+    assert all(f.data == b"\x00" for f in seen if f.can_id - 0x700 in NODES)
 
-    t = (board.now // MS + 1) * MS
-    # NMT start all; SDO: modes of operation = CSP, read back, heartbeat 20 ms
+    t = T0
+    # NMT start all; SDO: modes of operation = CSP (read back), heartbeat
+    # 20 ms (its phase from here on), following error window 500
     got = cycle(board, t, [nmt(0x01, 0)])
     t += MS
     for n in NODES:
@@ -144,81 +163,119 @@ def test_master_enables_drives_moves_them_and_sees_their_faults(rig, tmp_path: P
         got = cycle(board, t, [sdo_upload(n, 0x6061, 0)])
         t += MS
         assert [sdo_response(f.data) for f in got if f.can_id == 0x580 + n] == [("upload", 0x6061, 0, 8)]
-        for index, value, size in ((0x1017, 20, 2), (0x6065, 500, 4)):   # heartbeat 20 ms, FE window
+        for index, value, size in ((0x1017, 20, 2), (0x6065, 500, 4)):
             got = cycle(board, t, [sdo_download(n, index, 0, value, size)])
             t += MS
             assert [sdo_response(f.data)[0] for f in got if f.can_id == 0x580 + n] == ["download-ok"]
 
     # cyclic: RPDO1 per drive, then SYNC; TPDO1s come back after the SYNC
-    status: dict[int, int] = {}
-    position: dict[int, int] = {}
-    emcys: dict[int, list[tuple[int, int, int]]] = {n: [] for n in NODES}
-    heartbeats: dict[int, list[int]] = {n: [] for n in NODES}
+    run = Run([], {}, {n: [] for n in NODES}, {n: [] for n in NODES}, {n: [] for n in NODES},
+              {n: [] for n in NODES}, {})
     target = {n: 0 for n in NODES}
-    followed: dict[int, list[tuple[int, int, int]]] = {n: [] for n in NODES}
     k = 0
-    while t < 0.260e9:
+    while t < T_END:
         if k < 3:
             cw = (0x06, 0x07, 0x0F)[k]
         else:
             cw = 0x0F
-            for n in NODES:      # speed up to 30 * n counts/ms over 40 ms
-                target[n] += 30 * n * min(k - 3, 40) // 40
+            for n in NODES:      # speed up to RAMP[n] counts/ms over 40 ms
+                target[n] += RAMP[n] * min(k - 3, 40) // 40
         got = cycle(board, t, [rpdo1(n, cw, target[n]) for n in NODES] + [(0x080, b"")])
         for f in got:
             n = f.can_id & 0x7F
             if f.can_id - n == 0x180:
-                status[n], position[n] = tpdo1(f.data)
-                followed[n].append((t, target[n], position[n]))
+                run.status[n], pos = tpdo1(f.data)
+                run.followed[n].append((t, target[n], pos))
+                run.tpdo_times[n].append(t)
             elif f.can_id - n == 0x80:
                 code, reg = emcy(f.data)
-                emcys[n].append((t, code, reg))
+                run.emcys[n].append((t, code, reg))
             elif f.can_id - n == 0x700:
-                heartbeats[n].append(f.data[0])
+                run.heartbeats[n].append((t, f.data[0]))
         if k == 5:
-            assert all(cia402.state_of(status[n]) == State.OPERATION_ENABLED for n in NODES), status
+            assert all(cia402.state_of(run.status[n]) == State.OPERATION_ENABLED for n in NODES), run.status
         k += 1
         t += MS
-
-    # positions followed the targets while enabled, before the faults
     for n in NODES:
-        until = (FE_AT_S if n == FE_NODE else OC_AT_S) * 1e9
-        moving = [(tg, pos) for tc, tg, pos in followed[n] if tc < until]
-        assert moving[-1][0] > 3000 * n and moving[-1][1] > 3000 * n
-        # TPDO1's position is sampled at the SYNC, before the target sent with it
-        assert all(abs(tg - pos) < 100 * n for tg, pos in moving), moving
-    # the faults: EMCY with the code, at the guest time injected (within the
-    # following-error timeout and a few cycles for the jam)
-    assert [(c, r) for _, c, r in emcys[FE_NODE]] == [(0x8611, 0x21)], emcys
-    assert FE_AT_S * 1e9 < emcys[FE_NODE][0][0] < FE_AT_S * 1e9 + 30 * MS
-    assert [(c, r) for _, c, r in emcys[OC_NODE]] == [(0x2310, 0x03)], emcys
-    assert OC_AT_S * 1e9 - MS <= emcys[OC_NODE][0][0] <= OC_AT_S * 1e9 + MS
-    assert all(cia402.state_of(status[n]) == State.FAULT for n in NODES), status
-    for n in NODES:
-        assert heartbeats[n] and set(heartbeats[n]) == {0x05}, heartbeats
         got = cycle(board, t, [sdo_upload(n, 0x603F, 0)])
         t += MS
-        assert [sdo_response(f.data)[3] for f in got if f.can_id == 0x580 + n] == \
-               [0x8611 if n == FE_NODE else 0x2310]
+        answers = [sdo_response(f.data)[3] for f in got if f.can_id == 0x580 + n]
+        run.error_codes[n] = answers[0] if answers else None
 
     assert board.close() == 0
     assert observer.bye.wait(20) and observer.error is None, observer.error
+    assert drivesim.wait(timeout=30) == 0, (tmp_path / "drivesim.err").read_text()
+    run.records = observer.records
+    return run
+
+
+def test_master_enables_drives_moves_them_and_sees_their_faults(rig, tmp_path: Path) -> None:  # type: ignore[no-untyped-def]
+    board, procs = rig
+    asc, blf = tmp_path / "bus.asc", tmp_path / "bus.blf"
+    run = scenario(board, tmp_path, procs, [asc, blf])
+
+    # positions followed the targets while enabled, up to the faults
+    for n in (FE_NODE, OC_NODE):
+        until = (FE_AT_S if n == FE_NODE else OC_AT_S) * 1e9
+        moving = [(tg, pos) for tc, tg, pos in run.followed[n] if tc < until]
+        assert moving[-1][0] > 3000 * n and moving[-1][1] > 3000 * n
+        # TPDO1's position is sampled at the SYNC, before the target sent with it
+        assert all(abs(tg - pos) < 100 * n for tg, pos in moving), moving
+    # the faults: EMCY with the code, at the guest time injected (the jam
+    # trips once the following error passed 500 counts for 5 ms)
+    assert [(c, r) for _, c, r in run.emcys[FE_NODE]] == [(0x8611, 0x21)], run.emcys
+    assert FE_AT_S * 1e9 < run.emcys[FE_NODE][0][0] < FE_AT_S * 1e9 + 30 * MS
+    assert [(c, r) for _, c, r in run.emcys[OC_NODE]] == [(0x2310, 0x03)], run.emcys
+    assert OC_AT_S * 1e9 - MS <= run.emcys[OC_NODE][0][0] <= OC_AT_S * 1e9 + MS
+    for n in (FE_NODE, OC_NODE):
+        assert cia402.state_of(run.status[n]) == State.FAULT, run.status
+        assert run.error_codes[n] == (0x8611 if n == FE_NODE else 0x2310)
+        assert {s for _, s in run.heartbeats[n]} == {0x05}, run.heartbeats
+        hb = [tc for tc, _ in run.heartbeats[n]]
+        assert all(19 * MS <= b - a <= 21 * MS for a, b in zip(hb, hb[1:])), hb
+    # the drive off the bus: TPDOs and heartbeats until then, nothing after
+    assert run.tpdo_times[OFF_NODE] and max(run.tpdo_times[OFF_NODE]) < OFF_AT_S * 1e9
+    assert min(run.tpdo_times[OFF_NODE]) < OFF_AT_S * 1e9 - 20 * MS
+    assert all(tc < OFF_AT_S * 1e9 for tc, _ in run.heartbeats[OFF_NODE])
+    assert run.error_codes[OFF_NODE] is None and run.emcys[OFF_NODE] == []
+
     for p in procs:
         p.wait(timeout=30)
-    assert procs[2].returncode == 0, (tmp_path / "drivesim.err").read_text()
-
-    records = observer.records
-    check_bus_times(records)
+    check_bus_times(run.records)
     # the loggers hold every frame on the bus, in order, at the same times
     for path in (asc, blf):
         reader = can.ASCReader(str(path)) if path.suffix == ".asc" else can.BLFReader(str(path))
         logged = list(reader)
         assert [(m.arbitration_id, bytes(m.data)) for m in logged] == \
-               [(r.can_id, r.data) for r in records], path
-        t0 = records[0].t_ns / 1e9
+               [(r.can_id, r.data) for r in run.records], path
+        t0 = run.records[0].t_ns / 1e9
         m0 = logged[0].timestamp
-        for m, r in zip(logged, records):
+        for m, r in zip(logged, run.records):
             assert abs((m.timestamp - m0) - (r.t_ns / 1e9 - t0)) < 2e-6, (path, m, r)
+
+
+def test_two_runs_put_the_same_frames_on_the_bus_at_the_same_guest_times(tmp_path: Path) -> None:
+    """Guest time stays deterministic: everything after the boot-ups (which
+    come at host-dependent times, sent outside an exchange) is the same, to
+    the bit and the nanosecond, in two runs."""
+    binary = qemu_binary()
+    runs = []
+    for i in range(2):
+        work = tmp_path / f"run{i}"
+        work.mkdir()
+        board = Board(binary, work)
+        procs: list[subprocess.Popen[str]] = []
+        try:
+            runs.append(scenario(board, work, procs, []))
+        finally:
+            board.close()
+            for p in procs:
+                if p.poll() is None:
+                    p.kill()
+                p.wait()
+    a, b = ([(r.can_id, r.flags, r.dlc, r.data, r.t_ns) for r in run.records if r.t_ns > T0] for run in runs)
+    assert len(a) > 1000
+    assert a == b
 
 
 def check_bus_times(records: list[canlink.Record]) -> None:
