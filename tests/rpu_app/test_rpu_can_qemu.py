@@ -145,9 +145,11 @@ def _rig(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monk
 
 def _run(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monkeypatch) -> str:
     with _rig(can_build, tmp_path, buses, axes_mask, monkeypatch) as q:
-        # two statistics intervals with every drive enabled
-        n0 = len(re.findall(r"^stats cycle=", q.uart_text(), re.M))
-        q.wait_uart(r"^stats cycle=", count=n0 + 2, timeout=60)
+        # two whole statistics intervals with every drive enabled (the
+        # last line of an interval: the last controller's)
+        last = r"^stats canps=1 "
+        n0 = len(re.findall(last, q.uart_text(), re.M))
+        q.wait_uart(last, count=n0 + 2, timeout=120)
         text = q.uart_text()
         for b in buses:
             st = [tuple(map(int, m.groups())) for m in re.finditer(CAN_STATS_RE.format(bus=b), text, re.M)]
@@ -182,7 +184,7 @@ def test_drive_faults_reach_the_axis(can_build, tmp_path, monkeypatch):
     over-current becomes axis 1's fault with the drive's EMCY code 0x2310
     within 2 cycles; node 1 dropping off the bus is caught by the heartbeat
     consumer (60 ms, producer 20 ms) as 0x8130."""
-    t_oc, t_off = 20.0, 20.5
+    t_oc, t_off = 1.0, 1.5
     with _rig(can_build, tmp_path, [0], 0x3, monkeypatch,
               ("--fault", f"2:over-current@{t_oc}", "--fault", f"1:off-bus@{t_off}")) as q:
         en = [int(m.group(2)) for m in re.finditer(LINE_RE.format(i=r"\d", b=0, node=r"\d",
