@@ -5,7 +5,9 @@
 #
 # Contents: Debian's busybox-static:armhf as the whole userland, /init
 # (init.sh: mounts proc, sys, devtmpfs, debugfs, loads the remoteproc module,
-# runs a shell on the console ttyPS0), /usr/sbin/servoamp-net (net-up.sh:
+# runs a shell on the console ttyPS0), /usr/sbin/irqprio (irqprio.c: the
+# SCHED_FIFO priority of an interrupt's thread under PREEMPT_RT, run by /init
+# for the cycle interrupt), /usr/sbin/servoamp-net (net-up.sh:
 # eth0 up with 10.0.2.15/24 for QEMU user networking, run on demand, e.g. by
 # the recording tests before servod), the module given with --module in
 # /lib/modules/, every --firmware file in /lib/firmware/ (same name), and
@@ -52,8 +54,12 @@ for f in "${bins[@]}"; do [ -f "$f" ] || die "program $f not found"; done
 examples=()
 for f in "$repo"/examples/*.nc; do [ -f "$f" ] && examples+=("$f"); done
 
-gen_init_cpio=$repo/build/kernel/obj/usr/gen_init_cpio
-[ -x "$gen_init_cpio" ] || die "$gen_init_cpio missing: run linux/kernel/build.sh first"
+# the kernel's host tool: the same program in every kernel variant's tree
+gen_init_cpio=""
+for k in kernel kernel-rt; do
+	[ -x "$repo/build/$k/obj/usr/gen_init_cpio" ] && { gen_init_cpio=$repo/build/$k/obj/usr/gen_init_cpio; break; }
+done
+[ -n "$gen_init_cpio" ] || die "build/kernel/obj/usr/gen_init_cpio missing: run linux/kernel/build.sh first"
 
 . "$repo/scripts/lib/debian-mirror.sh"
 
@@ -91,7 +97,7 @@ flock -u 9
 
 # 2. Cache key over every input.
 key=$({
-	sha256sum "$deb" "$here/init.sh" "$here/net-up.sh" "$0" | cut -d' ' -f1
+	sha256sum "$deb" "$here/init.sh" "$here/net-up.sh" "$here/irqprio.c" "$0" | cut -d' ' -f1
 	[ -z "$module" ] || printf '%s %s\n' "$(sha256sum <"$module")" "$(basename "$module")"
 	for f in "${firmware[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 	for f in "${bins[@]}"; do printf 'bin %s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
@@ -119,6 +125,10 @@ trap 'rm -rf "$stage"' EXIT
 dpkg-deb -x "$deb" "$stage/deb"
 bb=$stage/deb/bin/busybox
 [ -f "$bb" ] || die "no bin/busybox in $deb"
+# irqprio (the interrupt thread's priority under PREEMPT_RT; busybox has no
+# chrt), a static armhf program like servod
+arm-linux-gnueabihf-gcc -static -O2 -Wall -Wextra -Werror -o "$stage/irqprio" "$here/irqprio.c" ||
+	die "irqprio.c does not build"
 list=$stage/list
 {
 	for d in /bin /sbin /dev /proc /sys /tmp /root /etc /lib /lib/modules \
@@ -132,6 +142,7 @@ list=$stage/list
 	echo "slink /bin/sh busybox 777 0 0"
 	echo "file /init $here/init.sh 755 0 0"
 	echo "file /usr/sbin/servoamp-net $here/net-up.sh 755 0 0"
+	echo "file /usr/sbin/irqprio $stage/irqprio 755 0 0"
 	[ -z "$module" ] || echo "file /lib/modules/$(basename "$module") $module 644 0 0"
 	for f in "${firmware[@]}"; do
 		echo "file /lib/firmware/$(basename "$f") $f 644 0 0"

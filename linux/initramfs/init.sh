@@ -18,6 +18,15 @@ for m in /lib/modules/*.ko; do
 	insmod "$m" || echo "servoamp: insmod $m failed"
 done
 
+# PREEMPT_RT (SERVOAMP_KERNEL=rt): every interrupt handler runs in a thread
+# irq/NN-NAME at SCHED_FIFO 50. The cycle interrupt's thread is the first
+# half of servod's wake-up (it wakes servod's read() on /dev/uioN): FIFO 81,
+# above servod's cycle thread (80) and every other interrupt thread (50:
+# Ethernet, UART), so neither the network nor the console delays the cycle
+# (docs/cycle.md, "Priorities under PREEMPT_RT"). Linux runs on CPU0 only
+# (maxcpus=1). The default kernel has no interrupt threads: nothing to set.
+irqprio cycle-interrupt 81 || echo "servoamp: irqprio cycle-interrupt failed"
+
 cat >/etc/profile <<'EOF'
 export PATH=/bin:/sbin:/usr/bin:/usr/sbin
 export PS1='servoamp:\w# '
