@@ -388,6 +388,16 @@ uint32_t app_cycle(const struct amp_cmd_record *cmd, int fresh, struct amp_fb_ax
 			fb[i].status_word |= SP_AX_FE_LIMIT;
 		fb[i].status_word |= be[i]->drive(i);
 	}
+	/* Drives beyond the axes in use (parameter "axes") are held disabled;
+	 * the model's are not stepped, as before. */
+	for (uint32_t i = n; i < AMP_MAX_AXES; i++) {
+		if (be[i] != &axis_model_ops) {
+			struct axis_in off = { AXIS_DISABLED, 0, 0, 0 };
+			struct amp_fb_axis unused;
+
+			be[i]->cycle(i, &k, &off, &unused);
+		}
+	}
 	if (can)
 		axis_can_cycle_end();
 	if (safestop) {
