@@ -24,19 +24,35 @@ is the host side itself:
 
 The frame lengths the qtest expects come from servoamp.canlink.frame_bits
 (the qtest prints them); this test checks the two agree.
+
+The qtest's frames go on the bus from qtest's register writes, in QEMU's
+main loop. On the board they come from a vCPU under ``-icount``: a
+bare-metal program (fixtures/canlink_echo.S) on the launcher's machine
+(``QemuMachine(can_links=...)``) sends a frame, the drive side
+(``servoamp.canlink.Link``, active) answers it, and the program counts its
+polls of the RX FIFO until the answer is there: 66 + 58 bit times of guest
+time at 1 Mbit/s, 4 instructions (4 ns) per poll.
 """
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
 import subprocess
+import threading
+import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from servoamp import qemu
 
 REPO = Path(__file__).resolve().parents[2]
+HERE = Path(__file__).resolve().parent
+LOAD = 0x00100000
+RESULT = 0x00200000
 CASES = ["exchange", "silent-client", "bad-record", "passive-client"]
 
 pytestmark = pytest.mark.board
@@ -69,3 +85,70 @@ def test_qtest_bus_times_agree_with_frame_bits(qtest_output: str) -> None:
         want = canlink.frame_bits(int(can_id, 16), fmt == "ext", kind == "rtr", int(dlc),
                                   bytes.fromhex(data))
         assert int(bits) == want, f"{can_id} {fmt} {kind} {dlc} {data}: qtest {bits}, frame_bits {want}"
+
+
+def _words(m: qemu.QemuMachine, addr: int, n: int) -> list[int]:
+    out = m.hmp(f"xp /{n}wx {addr:#x}")
+    return [int(w, 16) for w in re.findall(r"0x([0-9a-fA-F]{8})\b", out.split(":", 1)[1])][:n]
+
+
+def test_guest_frame_answered_at_its_bus_time(tmp_path: Path) -> None:
+    """The vCPU's path, under the board's -icount: the guest's frame reaches
+    the active and the passive client with its bus end time, the guest waits
+    (in guest time) for the answer exactly its modelled bus time, and the
+    passive client sees the answer as INFO at the time the guest got it."""
+    canlink = pytest.importorskip("servoamp.canlink")
+    if not shutil.which("arm-none-eabi-gcc"):
+        pytest.skip("arm-none-eabi-gcc missing: run scripts/bootstrap.sh")
+    elf = tmp_path / "canlink_echo.elf"
+    subprocess.run(["arm-none-eabi-gcc", "-mcpu=cortex-a9", "-nostdlib", "-nostartfiles",
+                    f"-Wl,-Ttext={LOAD:#x}", "-o", str(elf), str(HERE / "fixtures" / "canlink_echo.S")],
+                   check=True)
+    sock = Path(f"/tmp/servoamp-canlink-test-{os.getpid()}.sock")
+    extra = ["-S", "-device", f"loader,file={elf},cpu-num=0", "-device", f"loader,addr={LOAD:#x},cpu-num=1"]
+    m = qemu.QemuMachine(qemu.Board.load("zynq7000_qemu"), None, run_dir=tmp_path / "qemu", extra_args=extra,
+                         clock="virtual", can_links={0: sock}, can_link_opts={"timeout-ms": 10000})
+    got: list[Any] = []
+
+    def answer(drive: Any) -> None:
+        # its own thread: while QEMU waits for the DONE its main loop (QMP,
+        # so m.resume()'s answer) waits too
+        frame = drive.recv(timeout=30)
+        got.append(frame)
+        if frame is not None and frame.type == canlink.FRAME:
+            drive.send_frame(0x701, b"\x05")
+            drive.done(frame.seq)
+
+    with m.start():
+        with canlink.Link.connect(str(sock), active=True, name="drive") as drive, \
+                canlink.Link.connect(str(sock), active=False, name="logger") as logger:
+            assert drive.bitrate == 1_000_000
+            t = threading.Thread(target=answer, args=(drive,), daemon=True)
+            t.start()
+            m.resume()
+            t.join(60)
+            assert not t.is_alive() and got, "the drive got no frame"
+            frame = got[0]
+            assert frame is not None and frame.type == canlink.FRAME, frame
+            assert (frame.can_id, frame.eff, frame.rtr, frame.data, frame.seq, frame.info) == \
+                (0x181, False, False, b"\x12\x34", 1, False), frame
+
+            seen = logger.recv(timeout=30)
+            assert seen == frame, seen
+            info = logger.recv(timeout=30)
+            assert info is not None and info.info and info.seq == 0, info
+            assert (info.can_id, info.data) == (0x701, b"\x05"), info
+            answer_bits = canlink.frame_bits(0x701, False, False, 1, b"\x05")
+            assert info.t_ns == frame.t_ns + answer_bits * 1000, (frame, info)
+
+            deadline = time.monotonic() + 30
+            while (w := _words(m, RESULT, 5))[0] != 1:
+                assert time.monotonic() < deadline, f"the guest did not get the answer: {[hex(x) for x in w]}"
+                time.sleep(0.05)
+    _, polls, rxid, rxdlc, rxdw1 = w
+    assert rxid == 0x701 << 21 and rxdlc >> 28 == 1 and rxdw1 == 0x05000000, [hex(x) for x in w]
+    # guest time from the TXDW2 store to the answer: the guest frame's bits
+    # and the answer's, one ns per instruction, 4 instructions per poll
+    frame_bits = canlink.frame_bits(0x181, False, False, 2, b"\x12\x34")
+    want_ns = (frame_bits + answer_bits) * 1000
+    assert abs(polls * 4 - want_ns) <= 100, f"{polls} polls ({polls * 4} ns), expected {want_ns} ns"
