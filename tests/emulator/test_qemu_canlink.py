@@ -151,4 +151,5 @@ def test_guest_frame_answered_at_its_bus_time(tmp_path: Path) -> None:
     # and the answer's, one ns per instruction, 4 instructions per poll
     frame_bits = canlink.frame_bits(0x181, False, False, 2, b"\x12\x34")
     want_ns = (frame_bits + answer_bits) * 1000
+    print(f"guest waited {polls} polls ({polls * 4} ns), bus time {want_ns} ns")
     assert abs(polls * 4 - want_ns) <= 100, f"{polls} polls ({polls * 4} ns), expected {want_ns} ns"
