@@ -59,6 +59,8 @@ def serve(link: canlink.Link, drives: list[Drive]) -> int:
     number of frames handled."""
     log = logging.getLogger("servoamp.drivesim")
     handled = 0
+    log.info("connected: %d bit/s, guest time %.6f s, nodes %s", link.bitrate,
+             link.t_hello_ns / 1e9, ",".join(str(d.node_id) for d in drives))
     for d in drives:
         send(link, d.boot(link.t_hello_ns))
     while True:
