@@ -3,50 +3,160 @@
 #include "accel.h"
 
 #include "items.h"
+#include "pipeline.h"
 #include "plan.h"
 
-void accel_init(struct accel *a, const struct motion_config *cfg,
-		struct ring *in, struct ring *out, const struct ring *segs)
+void accel_init(struct accel *a, struct motion *m,
+		const struct motion_config *cfg, struct ring *in,
+		struct interp *ip, const struct ring *segs)
 {
+	a->m = m;
 	a->in = in;
-	a->out = out;
+	a->ip = ip;
 	a->segs = segs;
 	a->batch = cfg->batch;
+	a->lanes = cfg->interp_lanes;
+	a->chunk = cfg->interp_chunk ? cfg->interp_chunk : cfg->batch;
+	a->T = cfg->period_us * 1e-6;
 	a->jerk = cfg->jerk_limited;
+	a->tau = a->T;
+}
+
+/* At rest past the end of the current segment, with no next one planned:
+ * a sample at rest now, or wait for the next segment. */
+static bool rest_ready(const struct accel *a)
+{
+	return a->cur_valid && a->tau > a->dur && a->v1 <= 1e-9 &&
+	       ring_count(a->in) == 0 && pipeline_rest_now(a->m);
 }
 
 void accel_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 {
 	struct accel *a = arg;
+	const struct ring *out = &a->ip->lane[a->lane].in;
 
 	*ul = ring_count(a->in);
-	*dl = ring_count(a->out);
-	*dcap = a->out->cap;
+	if (a->cur_valid && a->tau <= a->dur)
+		*ul += 1; /* samples of the current segment still to deal */
+	else if (rest_ready(a))
+		*ul += 1;
+	*dl = ring_count(out);
+	*dcap = out->cap;
+}
+
+/* Makes a planned segment the current one: its peak speed and the
+ * duration of its profile. */
+static void take(struct accel *a, const struct planned *in)
+{
+	struct profile p;
+	const struct seg *g = seg_at(a->segs, in->seg);
+
+	a->seg = in->seg;
+	a->kind = in->kind;
+	a->v0 = in->v0;
+	a->v1 = in->v1;
+	a->vp = in->kind == SEG_MOVE ? plan_peak(g, in->v0, in->v1, a->jerk) : 0.0;
+	plan_profile(&p, g, a->v0, a->vp, a->v1, a->jerk);
+	a->dur = p.dur;
+	a->cur_valid = true;
+}
+
+/* One piece into the current lane: the samples of the current segment
+ * that fit in the current chunk (at_end: the sample at rest instead).
+ * false when the lane's ring is full. */
+static bool deal(struct accel *a, bool at_end)
+{
+	struct ring *r = &a->ip->lane[a->lane].in;
+	struct piece *pc = ring_slot(r);
+	uint32_t n = 0, room = a->chunk - a->fill;
+
+	if (!pc)
+		return false;
+	pc->seg = a->seg;
+	pc->kind = a->kind;
+	pc->v0 = a->v0;
+	pc->vp = a->vp;
+	pc->v1 = a->v1;
+	pc->tau0 = a->tau;
+	if (at_end) {
+		n = 1;
+		pc->n = 0;
+		pc->flags = PIECE_AT_END;
+	} else {
+		/* the serial chain of sample times: the lane repeats it */
+		while (a->tau <= a->dur && n < room) {
+			a->tau += a->T;
+			n++;
+		}
+		pc->n = n;
+		pc->flags = 0;
+	}
+	a->fill += n;
+	if (a->fill >= a->chunk)
+		pc->flags |= PIECE_CHUNK_END;
+	ring_commit(r);
+	atomic_fetch_add_explicit(&a->issued[a->lane], n, memory_order_release);
+	if (a->fill >= a->chunk) {
+		a->fill = 0;
+		a->lane = a->lane + 1 < a->lanes ? a->lane + 1 : 0;
+	}
+	return true;
 }
 
 uint32_t accel_run(void *arg, unsigned worker)
 {
 	struct accel *a = arg;
-	uint32_t done = 0;
+	struct interp *ip = a->ip;
+	uint32_t done = 0, taken = 0;
 
 	(void)worker;
 	while (done < a->batch) {
-		struct timed *p = ring_slot(a->out);
+		if (a->cur_valid && a->tau <= a->dur) {
+			if (!deal(a, false))
+				break;
+			done++;
+			continue;
+		}
 		const struct planned *in = ring_front(a->in);
-		if (!p || !in)
+		if (a->cur_valid) {
+			/* past the end of the current segment */
+			if (in && in->kind != SEG_END) {
+				a->tau -= a->dur;
+				take(a, in);
+				ring_release(a->in);
+				done++;
+				taken++;
+				continue;
+			}
+			if (a->v1 > 1e-9)
+				break; /* moving: wait for the next segment */
+			if (!in && !pipeline_rest_now(a->m))
+				break; /* at rest: the next one is on its way */
+			if (!deal(a, true))
+				break;
+			a->cur_valid = false;
+			a->tau = a->T;
+			done++;
+			continue;
+		}
+		if (!in)
 			break;
-		p->seg = in->seg;
-		p->kind = in->kind;
-		p->v0 = in->v0;
-		p->v1 = in->v1;
-		p->vp = in->kind == SEG_MOVE
-				? plan_peak(seg_at(a->segs, in->seg), in->v0,
-					    in->v1, a->jerk)
-				: 0.0;
+		if (in->kind == SEG_END) {
+			ring_release(a->in);
+			atomic_store(&ip->done, true);
+			pipeline_notify_end(a->m);
+			done++;
+			taken++;
+			continue;
+		}
+		atomic_store(&ip->done, false);
+		atomic_fetch_add(&ip->active, 1);
+		a->tau = a->T;
+		take(a, in);
 		ring_release(a->in);
-		ring_commit(a->out);
 		done++;
+		taken++;
 	}
-	atomic_fetch_add_explicit(&a->n_profiles, done, memory_order_relaxed);
+	atomic_fetch_add_explicit(&a->n_profiles, taken, memory_order_relaxed);
 	return done;
 }

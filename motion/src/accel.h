@@ -2,7 +2,11 @@
 /*
  * The accel stage: the peak speed of each planned segment, between its
  * entry and exit speeds (plan_peak(): closed form for trapezoids, a
- * bracketed Newton iteration for S-curves).
+ * bracketed Newton iteration for S-curves); and the serial part of
+ * interpolation (interp.h): the duration of the segment's profile, the
+ * time of its first sample (carried over from the previous segment), the
+ * choice at a stop between going on and a sample at rest, and the cut of
+ * the samples into chunks dealt to the interpolation lanes in turn.
  */
 #ifndef SERVOAMP_MOTION_ACCEL_H
 #define SERVOAMP_MOTION_ACCEL_H
@@ -11,22 +15,33 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "interp.h"
 #include "motion/motion.h"
 #include "motion/ring.h"
 
 struct accel {
 	/* wiring, read-only after accel_init() */
+	struct motion *m;         /* for pipeline_rest_now() */
 	struct ring *in;          /* struct planned */
-	struct ring *out;         /* struct timed */
+	struct interp *ip;        /* the lanes (their input rings) */
 	const struct ring *segs;  /* the segments the items refer to */
-	uint32_t batch;
+	uint32_t batch, lanes, chunk;
+	double T;
 	bool jerk;
-	/* state */
+	/* state: the current segment and the time into it */
+	uint32_t seg;
+	uint8_t kind;
+	bool cur_valid;
+	double v0, vp, v1, dur, tau;
+	uint32_t lane, fill;      /* current lane, samples in its chunk */
 	_Atomic uint64_t n_profiles;
+	/* samples dealt to each lane (read by interp_levels()) */
+	_Alignas(RING_CACHELINE) _Atomic uint64_t issued[INTERP_MAX_LANES];
 };
 
-void accel_init(struct accel *a, const struct motion_config *cfg,
-		struct ring *in, struct ring *out, const struct ring *segs);
+void accel_init(struct accel *a, struct motion *m,
+		const struct motion_config *cfg, struct ring *in,
+		struct interp *ip, const struct ring *segs);
 
 /* Scheduler task (arg: struct accel). */
 void accel_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap);

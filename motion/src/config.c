@@ -32,6 +32,8 @@ void motion_config_default(struct motion_config *c)
 	c->q_setpoints = 64;
 	c->batch = 8;
 	c->policy = MOTION_POLICY_HYBRID;
+	c->interp_lanes = MOTION_DEFAULT_LANES;
+	c->interp_chunk = 0;
 	c->trace_samples = 0;
 	c->monitor_period_us = 10000;
 }
@@ -91,6 +93,10 @@ int config_check(const struct motion_config *c, struct motion_error *err)
 		return cfg_fail(err, "queue capacities too small", -1);
 	if (c->batch < 1 || c->batch > 4096)
 		return cfg_fail(err, "batch must be 1..4096", -1);
+	if (c->interp_lanes > MOTION_MAX_WORKERS)
+		return cfg_fail(err, "interp_lanes must be 0..8", -1);
+	if (c->interp_chunk > (1u << 20))
+		return cfg_fail(err, "interp_chunk must be 0..1048576", -1);
 	if (c->min_job > 4096)
 		return cfg_fail(err, "min_job must be 0..4096", -1);
 	return 0;

@@ -10,11 +10,24 @@
 
 /* ---- benchmark sink ------------------------------------------------------ */
 
+/* The lane whose chunk is next to be taken. */
+static struct ring *cur_out(struct motion *m)
+{
+	return &m->ip.lane[m->out.lane].out;
+}
+
+/* After taking setpoint c: the last of its chunk moves to the next lane. */
+static void chunk_step(struct motion *m, const int32_t *c)
+{
+	if (c[1] & SP_CHUNK_END)
+		m->out.lane = m->out.lane + 1 < m->ip.lanes ? m->out.lane + 1 : 0;
+}
+
 void sink_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 {
 	struct motion *m = arg;
 
-	*ul = ring_count(&m->q[Q_SETPOINTS]);
+	*ul = ring_count(cur_out(m));
 	*dl = 0;
 	*dcap = 1;
 }
@@ -23,17 +36,20 @@ uint32_t sink_run(void *arg, unsigned worker)
 {
 	struct motion *m = arg;
 	struct consumer *o = &m->out;
-	struct ring *q = &m->q[Q_SETPOINTS];
 	const int32_t *c;
-	int32_t last[1 + 2 * MOTION_MAX_AXES];
+	int32_t last[2 + 2 * MOTION_MAX_AXES];
 	uint32_t done = 0;
 
 	(void)worker;
-	while (done < m->cfg.batch * 4 && (c = ring_front(q)) != NULL) {
+	while (done < m->cfg.batch * 4) {
+		struct ring *q = cur_out(m);
+		if ((c = ring_front(q)) == NULL)
+			break;
 		for (uint32_t k = 0; k < m->na; k++)
-			o->sink_sum += (uint64_t)(uint32_t)c[1 + k];
+			o->sink_sum += (uint64_t)(uint32_t)c[2 + k];
 		memcpy(last, c, q->elem);
 		ring_release(q);
+		chunk_step(m, last);
 		o->cycle++;
 		done++;
 	}
@@ -109,9 +125,10 @@ static enum motion_status no_setpoint(struct motion *m,
 				      struct motion_setpoint *out)
 {
 	bool faulted = pipeline_faulted(m);
-	if (atomic_load(&m->ip.done))
+	bool moving = atomic_load(&m->ip.active) > 0;
+	if (atomic_load(&m->ip.done) && !moving && interp_drained(&m->ip))
 		return hold(m, out, faulted ? MOTION_ST_FAULT : MOTION_ST_DONE);
-	if (!atomic_load(&m->ip.moving))
+	if (!moving)
 		return hold(m, out, MOTION_ST_IDLE);
 	/* moving, and no setpoint: the planner fell behind */
 	m->out.underrun = true;
@@ -125,7 +142,7 @@ static enum motion_status no_setpoint(struct motion *m,
 enum motion_status motion_next_setpoint(struct motion *m,
 					 struct motion_setpoint *out)
 {
-	struct ring *q = &m->q[Q_SETPOINTS];
+	struct ring *q = cur_out(m);
 
 	if (m->out.underrun)
 		return hold(m, out, MOTION_ST_UNDERRUN);
@@ -135,7 +152,10 @@ enum motion_status motion_next_setpoint(struct motion *m,
 	if (!c)
 		return no_setpoint(m, out);
 	sp_unpack(m->na, c, out);
+	bool next = c[1] & SP_CHUNK_END;
 	ring_release(q);
+	if (next)
+		m->out.lane = m->out.lane + 1 < m->ip.lanes ? m->out.lane + 1 : 0;
 	out->cycle = m->out.cycle++;
 	m->out.last = *out;
 	atomic_fetch_add_explicit(&m->out.n_setpoints, 1, memory_order_relaxed);

@@ -16,6 +16,7 @@
 struct consumer {
 	struct motion_setpoint last; /* held when no new setpoint comes */
 	uint64_t cycle;
+	uint32_t lane; /* the interpolation lane of the next chunk */
 	bool underrun;
 	uint64_t sink_sum;
 	_Atomic uint64_t n_setpoints, n_underruns;

@@ -1,141 +1,199 @@
 /* SPDX-License-Identifier: MIT */
-/* The interpolation stage (see interp.h). */
+/* The interpolation lanes (see interp.h). */
 #include "interp.h"
+
+#include <stdlib.h>
+#include <string.h>
 
 #include "items.h"
 #include "pipeline.h"
 
-void interp_init(struct interp *ip, struct motion *m,
-		 const struct motion_config *cfg, struct ring *in,
-		 struct ring *out, const struct ring *segs)
+int interp_init(struct interp *ip, struct motion *m,
+		const struct motion_config *cfg, const struct ring *segs,
+		const _Atomic uint64_t *issued, uint32_t lane_in,
+		uint32_t lane_out)
 {
 	ip->m = m;
-	ip->in = in;
-	ip->out = out;
 	ip->segs = segs;
 	ip->na = cfg->n_axes;
 	ip->batch = cfg->batch;
+	ip->lanes = cfg->interp_lanes;
 	ip->T = cfg->period_us * 1e-6;
 	ip->ipm = cfg->increments_per_mm;
 	ip->jerk = cfg->jerk_limited;
-	ip->tau_start = ip->T;
+	for (uint32_t k = 0; k < ip->lanes; k++) {
+		struct interp_lane *l = &ip->lane[k];
+		l->ip = ip;
+		l->id = k;
+		l->issued = &issued[k];
+		if (ring_init(&l->in, sizeof(struct piece), lane_in) ||
+		    ring_init(&l->out, sp_size(cfg->n_axes), lane_out))
+			return -1;
+	}
+	return 0;
 }
 
-static void make_setpoint(const struct interp *ip, int32_t *sp,
-			  const struct profile *p, const struct seg *g,
-			  double tau, bool at_end)
+void interp_free(struct interp *ip)
+{
+	for (uint32_t k = 0; k < INTERP_MAX_LANES; k++) {
+		ring_free(&ip->lane[k].in);
+		ring_free(&ip->lane[k].out);
+	}
+}
+
+void interp_sample(const struct interp *ip, int32_t *sp,
+		   const struct profile *p, const struct seg *g, double tau,
+		   bool at_end)
 {
 	const uint32_t n = ip->na;
 	const double *p0 = SEG_P0(g, n), *p1 = SEG_P1(g, n), *u = SEG_U(g, n);
 	double s = 0, v = 0;
 
 	sp[0] = (int32_t)g->line;
+	sp[1] = 0;
 	if (!at_end && p->kind == SEG_MOVE)
 		plan_eval(p, g->len, tau, &s, &v);
 	bool end = at_end || (p->kind == SEG_MOVE && s >= g->len);
 	double f = g->len > 0 ? s / g->len : 0.0;
 	for (uint32_t k = 0; k < n; k++) {
 		double x = end ? p1[k] : p0[k] + (p1[k] - p0[k]) * f;
-		sp[1 + k] = to_inc(x * ip->ipm);
-		sp[1 + n + k] = at_end ? 0 : to_inc(v * u[k] * ip->ipm);
+		sp[2 + k] = to_inc(x * ip->ipm);
+		sp[2 + n + k] = at_end ? 0 : to_inc(v * u[k] * ip->ipm);
 	}
 }
 
+/* UL: samples dealt to the lane and not produced yet (the accel stage
+ * publishes what it dealt after each piece, the lane what it produced
+ * after each job; levels are read only while the lane does not run). */
 void interp_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 {
-	struct interp *ip = arg;
-	uint32_t q = ring_count(ip->in);
+	struct interp_lane *l = arg;
+	uint64_t is = atomic_load_explicit(l->issued, memory_order_acquire);
+	uint64_t pr = atomic_load_explicit(&l->produced, memory_order_relaxed);
+	uint64_t d = is - pr;
 
-	*ul = q;
-	if (ip->cur_valid &&
-	    (ip->tau <= ip->cur.dur || q > 0 || ip->cur.v1 <= 1e-9))
-		*ul += 1;
-	*dl = ring_count(ip->out);
-	*dcap = ip->out->cap;
-}
-
-/* Makes a planned segment the current one: expands its timed profile. */
-static void interp_take(struct interp *ip, const struct timed *t)
-{
-	ip->cur_g = seg_at(ip->segs, t->seg);
-	plan_profile(&ip->cur, ip->cur_g, t->v0, t->vp, t->v1, ip->jerk);
-}
-
-/* No current segment: take the next one, or pass the end marker on.
- * Returns false if there is nothing to take. */
-static bool interp_start(struct interp *ip, uint32_t *done)
-{
-	const struct timed *p = ring_front(ip->in);
-	if (!p)
-		return false;
-	if (p->kind == SEG_END) {
-		ring_release(ip->in);
-		atomic_store(&ip->done, true);
-		pipeline_notify_end(ip->m);
-		(*done)++;
-		return true;
-	}
-	atomic_store(&ip->done, false);
-	interp_take(ip, p);
-	ring_release(ip->in);
-	ip->cur_valid = true;
-	ip->tau = ip->tau_start;
-	atomic_store(&ip->moving, true);
-	return true;
-}
-
-/* Past the end of the current profile: go on into the next segment, wait
- * for it while moving, or stop at the end point.  Returns false when the
- * job must end here. */
-static bool interp_past_end(struct interp *ip, uint32_t *done)
-{
-	const struct timed *nx = ring_front(ip->in);
-	if (nx && nx->kind != SEG_END) {
-		ip->tau -= ip->cur.dur;
-		interp_take(ip, nx);
-		ring_release(ip->in);
-		return true;
-	}
-	if (ip->cur.v1 > 1e-9)
-		return false; /* moving: wait for the next profile */
-	/* at rest: one sample exactly at the end point, then idle */
-	int32_t *sp = ring_slot(ip->out);
-	if (!sp)
-		return false;
-	make_setpoint(ip, sp, &ip->cur, ip->cur_g, ip->tau, true);
-	ring_commit(ip->out);
-	ip->cur_valid = false;
-	ip->tau_start = ip->T;
-	atomic_store(&ip->moving, false);
-	(*done)++;
-	return true;
+	*ul = d > UINT32_MAX ? UINT32_MAX : (uint32_t)d;
+	if (*ul == 0 && ring_count(&l->in) > 0)
+		*ul = 1; /* not reached: a piece has a sample */
+	*dl = ring_count(&l->out);
+	*dcap = l->out.cap;
 }
 
 uint32_t interp_run(void *arg, unsigned worker)
 {
-	struct interp *ip = arg;
+	struct interp_lane *l = arg;
+	struct interp *ip = l->ip;
+	const double T = ip->T;
 	uint32_t done = 0;
 
 	(void)worker;
 	while (done < ip->batch) {
-		if (!ip->cur_valid) {
-			if (!interp_start(ip, &done))
-				break;
-			if (!ip->cur_valid)
-				continue; /* the end marker */
+		const struct piece *pc = ring_front(&l->in);
+		if (!pc)
+			break;
+		if (!l->have) {
+			l->g = seg_at(ip->segs, pc->seg);
+			plan_profile(&l->prof, l->g, pc->v0, pc->vp, pc->v1, ip->jerk);
+			l->tau = pc->tau0;
+			l->i = 0;
+			l->have = true;
 		}
-		if (ip->tau <= ip->cur.dur) {
-			int32_t *sp = ring_slot(ip->out);
+		const bool at_end = pc->flags & PIECE_AT_END;
+		const bool chunk_end = pc->flags & PIECE_CHUNK_END;
+		while (l->i < pc->n && done < ip->batch) {
+			int32_t *sp = ring_slot(&l->out);
+			if (!sp)
+				goto out;
+			interp_sample(ip, sp, &l->prof, l->g, l->tau, false);
+			l->i++;
+			if (chunk_end && !at_end && l->i == pc->n)
+				sp[1] = SP_CHUNK_END;
+			ring_commit(&l->out);
+			l->tau += T;
+			done++;
+		}
+		if (l->i < pc->n)
+			break; /* the job's batch is full */
+		if (at_end) {
+			if (done >= ip->batch)
+				break;
+			int32_t *sp = ring_slot(&l->out);
 			if (!sp)
 				break;
-			make_setpoint(ip, sp, &ip->cur, ip->cur_g, ip->tau, false);
-			ring_commit(ip->out);
-			ip->tau += ip->T;
+			interp_sample(ip, sp, &l->prof, l->g, l->tau, true);
+			if (chunk_end)
+				sp[1] = SP_CHUNK_END;
+			ring_commit(&l->out);
 			done++;
-			continue;
+			/* at rest: the motion that accel started has ended */
+			atomic_fetch_sub(&ip->active, 1);
 		}
-		if (!interp_past_end(ip, &done))
-			break;
+		ring_release(&l->in);
+		l->have = false;
 	}
+out:
+	atomic_fetch_add_explicit(&l->produced, done, memory_order_release);
 	return done;
+}
+
+uint32_t interp_in_count(const struct interp *ip)
+{
+	uint32_t n = 0;
+	for (uint32_t k = 0; k < ip->lanes; k++)
+		n += ring_count(&ip->lane[k].in);
+	return n;
+}
+
+uint32_t interp_out_count(const struct interp *ip)
+{
+	uint32_t n = 0;
+	for (uint32_t k = 0; k < ip->lanes; k++)
+		n += ring_count(&ip->lane[k].out);
+	return n;
+}
+
+uint32_t interp_in_cap(const struct interp *ip)
+{
+	uint32_t n = 0;
+	for (uint32_t k = 0; k < ip->lanes; k++)
+		n += ip->lane[k].in.cap;
+	return n;
+}
+
+uint32_t interp_out_cap(const struct interp *ip)
+{
+	uint32_t n = 0;
+	for (uint32_t k = 0; k < ip->lanes; k++)
+		n += ip->lane[k].out.cap;
+	return n;
+}
+
+uint32_t interp_in_peak(const struct interp *ip)
+{
+	uint32_t n = 0;
+	for (uint32_t k = 0; k < ip->lanes; k++)
+		n += atomic_load(&ip->lane[k].in.peak);
+	return n;
+}
+
+uint32_t interp_out_peak(const struct interp *ip)
+{
+	uint32_t n = 0;
+	for (uint32_t k = 0; k < ip->lanes; k++)
+		n += atomic_load(&ip->lane[k].out.peak);
+	return n;
+}
+
+/* Upstream first: a lane releases a piece only after committing its last
+ * setpoint, so empty input rings mean every setpoint is in an output
+ * ring. */
+bool interp_drained(const struct interp *ip)
+{
+	for (uint32_t k = 0; k < ip->lanes; k++)
+		if (ring_count(&ip->lane[k].in))
+			return false;
+	for (uint32_t k = 0; k < ip->lanes; k++)
+		if (ring_count(&ip->lane[k].out))
+			return false;
+	return true;
 }

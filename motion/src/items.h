@@ -5,8 +5,9 @@
  *   stream bytes -> decode -> struct gc_block (gcode.h)
  *                -> fit    -> struct seg
  *                -> look-ahead -> struct planned
- *                -> accel  -> struct timed
- *                -> interp -> compact setpoint (int32 words, below)
+ *                -> accel  -> struct piece (one ring per interpolation lane)
+ *                -> interp -> compact setpoint (int32 words, below; one
+ *                             ring per lane, read in chunk order)
  *                -> motion_next_setpoint(): struct motion_setpoint
  */
 #ifndef SERVOAMP_MOTION_ITEMS_H
@@ -65,23 +66,32 @@ struct planned {
 	double v0, v1;
 };
 
-/* Accel-planning output: the segment (by reference) with its entry, peak
- * and exit speeds, 32 bytes.  Finding the peak speed is the planning
- * (a bisection in jerk-limited mode); the interpolator expands the timed
- * profile (plan.h) from these three speeds when it takes the segment, so
- * that only 32 bytes per segment travel between the two stages. */
-struct timed {
+/* Interpolation input (accel -> one interpolation lane, see interp.h):
+ * the part of one segment that falls into one chunk of setpoints.  The
+ * lane expands the profile from the three speeds and takes n samples at
+ * tau0, tau0 + T, ... (each by adding T to the previous one, as the
+ * serial interpolator did), then, with PIECE_AT_END, one sample exactly at
+ * the end point.  PIECE_CHUNK_END: its last sample ends the chunk. */
+enum { PIECE_AT_END = 1, PIECE_CHUNK_END = 2 };
+
+struct piece {
 	uint32_t seg;
-	uint8_t kind;
+	uint32_t n;
+	uint8_t kind, flags;
+	double tau0;
 	double v0, vp, v1;
 };
 
 /* Setpoints travel through their ring compactly, sized by the number of
- * axes n: int32 line, pos[n], vel[n] (status MOVING, cycle assigned by the
- * consumer).  sp_unpack() makes the public struct motion_setpoint. */
+ * axes n: int32 line, flags (SP_CHUNK_END: the last of its chunk; the
+ * consumer reads the next lane after it), pos[n], vel[n] (status MOVING,
+ * cycle assigned by the consumer).  sp_unpack() makes the public struct
+ * motion_setpoint. */
+#define SP_CHUNK_END 1
+
 static inline size_t sp_size(uint32_t n_axes)
 {
-	return (1u + 2u * n_axes) * sizeof(int32_t);
+	return (2u + 2u * n_axes) * sizeof(int32_t);
 }
 
 static inline void sp_unpack(uint32_t n, const int32_t *c,
@@ -91,8 +101,8 @@ static inline void sp_unpack(uint32_t n, const int32_t *c,
 	sp->n_axes = (uint8_t)n;
 	sp->line = (uint32_t)c[0];
 	sp->status = MOTION_ST_MOVING;
-	memcpy(sp->pos, c + 1, n * sizeof(int32_t));
-	memcpy(sp->vel, c + 1 + n, n * sizeof(int32_t));
+	memcpy(sp->pos, c + 2, n * sizeof(int32_t));
+	memcpy(sp->vel, c + 2 + n, n * sizeof(int32_t));
 }
 
 /* Millimetres (or mm/s) times increments per mm to int32 increments,

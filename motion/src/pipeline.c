@@ -122,10 +122,21 @@ bool pipeline_starving(const struct motion *m)
 	}
 	if (m->threaded && !m->cfg.drain_sink &&
 	    ring_count(&m->q[Q_PLANNED]) == 0 &&
-	    ring_count(&m->q[Q_PROFILES]) == 0 &&
-	    ring_count(&m->q[Q_SETPOINTS]) < m->q[Q_SETPOINTS].cap / 4)
+	    interp_in_count(&m->ip) == 0 &&
+	    interp_out_count(&m->ip) < interp_out_cap(&m->ip) / 4)
 		return true;
 	return false;
+}
+
+/* With the whole program in (the stream closed), the next segment always
+ * comes (the end marker at the latest, also after a fault), so the output
+ * does not depend on when it comes: only an open stream that ran dry, or a
+ * real-time consumer running short, stops at rest. */
+bool pipeline_rest_now(const struct motion *m)
+{
+	if (!pipeline_starving(m))
+		return false;
+	return !stream_closed(&m->src) || (m->threaded && !m->cfg.drain_sink);
 }
 
 /* ---- input --------------------------------------------------------------- */
@@ -174,6 +185,35 @@ int motion_load_program(struct motion *m, const char *text, size_t len)
 	return 0;
 }
 
+/* The chain's queues; the last two are the interpolation lanes' rings, as
+ * one queue each. */
+static uint32_t queue_count(const struct motion *m, unsigned q)
+{
+	if (q == Q_PROFILES)
+		return interp_in_count(&m->ip);
+	if (q == Q_SETPOINTS)
+		return interp_out_count(&m->ip);
+	return ring_count(&m->q[q]);
+}
+
+static uint32_t queue_cap(const struct motion *m, unsigned q)
+{
+	if (q == Q_PROFILES)
+		return interp_in_cap(&m->ip);
+	if (q == Q_SETPOINTS)
+		return interp_out_cap(&m->ip);
+	return m->q[q].cap;
+}
+
+static uint32_t queue_peak(const struct motion *m, unsigned q)
+{
+	if (q == Q_PROFILES)
+		return interp_in_peak(&m->ip);
+	if (q == Q_SETPOINTS)
+		return interp_out_peak(&m->ip);
+	return atomic_load(&m->q[q].peak);
+}
+
 /* ---- queue-level trace ----------------------------------------------------- */
 
 static void sample_levels(void *arg, uint32_t *v)
@@ -182,7 +222,7 @@ static void sample_levels(void *arg, uint32_t *v)
 
 	v[Q_STREAM] = stream_backlog(&m->src);
 	for (unsigned q = 1; q < MOTION_N_QUEUES; q++)
-		v[q] = ring_count(&m->q[q]);
+		v[q] = queue_count(m, q);
 }
 
 /* Threaded mode: the periodic task that takes the samples. */
@@ -203,16 +243,21 @@ static int make_rings(struct motion *m, const struct motion_config *cfg)
 	return ring_init(&m->q[Q_BLOCKS], sizeof(struct gc_block), cfg->q_blocks) ||
 	       /* segments are referred to by their slot until interpolation
 		* is done with them: a slot is reused only after the segment
-		* ring, the look-ahead window, the planned and profile queues
-		* and the current profile have all moved past it */
+		* ring, the look-ahead window, the planned queue, accel's
+		* current segment and every lane's pieces (one piece per
+		* segment at least) have all moved past it */
 	       ring_init_slots(&m->q[Q_SEGS], seg_size(cfg->n_axes),
 			       cfg->q_segments,
 			       cfg->q_segments + cfg->lookahead + cfg->q_planned +
-				       cfg->q_profiles + 4u) ||
-	       ring_init(&m->q[Q_PLANNED], sizeof(struct planned), cfg->q_planned) ||
-	       ring_init(&m->q[Q_PROFILES], sizeof(struct timed), cfg->q_profiles) ||
-	       ring_init(&m->q[Q_SETPOINTS], sp_size(cfg->n_axes), cfg->q_setpoints);
+				       cfg->interp_lanes * (cfg->q_profiles + 1u) +
+				       4u) ||
+	       ring_init(&m->q[Q_PLANNED], sizeof(struct planned), cfg->q_planned);
 }
+
+static const char *const lane_names[INTERP_MAX_LANES] = {
+	"interp0", "interp1", "interp2", "interp3",
+	"interp4", "interp5", "interp6", "interp7",
+};
 
 /* The scheduler's tasks: the stages in chain order, then the optional
  * sink and the periodic tasks. */
@@ -230,8 +275,12 @@ static size_t task_table(struct motion *m, struct sched_task_desc *t)
 		.levels = lookahead_levels, .run = lookahead_run, .arg = &m->la };
 	t[n++] = (struct sched_task_desc){ .name = "accel", .order = 3,
 		.levels = accel_levels, .run = accel_run, .arg = &m->acc };
-	t[n++] = (struct sched_task_desc){ .name = "interp", .order = 4,
-		.levels = interp_levels, .run = interp_run, .arg = &m->ip };
+	/* the interpolation lanes: one task each, the same place in the
+	 * chain */
+	for (uint32_t k = 0; k < cfg->interp_lanes; k++)
+		t[n++] = (struct sched_task_desc){ .name = lane_names[k],
+			.order = 4, .levels = interp_levels, .run = interp_run,
+			.arg = &m->ip.lane[k] };
 	if (cfg->drain_sink)
 		t[n++] = (struct sched_task_desc){ .name = "sink", .order = 5,
 			.levels = sink_levels, .run = sink_run, .arg = m };
@@ -279,15 +328,16 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	m->ipm = cfg->increments_per_mm;
 	cfg = &m->cfg; /* the stages keep a pointer to it */
 	init_locks(m);
+	if (m->cfg.interp_lanes == 0)
+		m->cfg.interp_lanes = MOTION_DEFAULT_LANES;
 	if (stream_init(&m->src, cfg) || make_rings(m, cfg) ||
-	    lookahead_init(&m->la, m, cfg, &m->q[Q_SEGS], &m->q[Q_PLANNED]))
+	    lookahead_init(&m->la, m, cfg, &m->q[Q_SEGS], &m->q[Q_PLANNED]) ||
+	    interp_init(&m->ip, m, cfg, &m->q[Q_SEGS], m->acc.issued,
+			cfg->q_profiles, cfg->q_setpoints))
 		goto nomem;
 	decode_init(&m->dec, m, cfg, &m->src, &m->q[Q_BLOCKS]);
 	fit_init(&m->fit, cfg, &m->q[Q_BLOCKS], &m->q[Q_SEGS]);
-	accel_init(&m->acc, cfg, &m->q[Q_PLANNED], &m->q[Q_PROFILES],
-		   &m->q[Q_SEGS]);
-	interp_init(&m->ip, m, cfg, &m->q[Q_PROFILES], &m->q[Q_SETPOINTS],
-		    &m->q[Q_SEGS]);
+	accel_init(&m->acc, m, cfg, &m->q[Q_PLANNED], &m->ip, &m->q[Q_SEGS]);
 	m->out.last.n_axes = (uint8_t)cfg->n_axes;
 	for (uint32_t k = 0; k < cfg->n_axes; k++)
 		m->out.last.pos[k] = to_inc(cfg->start_pos[k] * m->ipm);
@@ -323,6 +373,7 @@ void motion_destroy(struct motion *m)
 		ring_free(&m->q[q]);
 	stream_free(&m->src);
 	lookahead_free(&m->la);
+	interp_free(&m->ip);
 	pthread_mutex_destroy(&m->fault.lock);
 	pthread_mutex_destroy(&m->end.lock);
 	pthread_cond_destroy(&m->end.cond);
@@ -358,7 +409,7 @@ const struct motion_error *motion_last_error(const struct motion *m)
 
 bool motion_done(const struct motion *m)
 {
-	return atomic_load(&m->ip.done) && ring_count(&m->q[Q_SETPOINTS]) == 0;
+	return atomic_load(&m->ip.done) && interp_drained(&m->ip);
 }
 
 int motion_wait(struct motion *m, uint32_t timeout_ms)
@@ -390,8 +441,8 @@ void motion_queue_levels(const struct motion *m, uint32_t level[MOTION_N_QUEUES]
 	level[Q_STREAM] = motion_stream_level(m);
 	cap[Q_STREAM] = m->src.size;
 	for (unsigned q = 1; q < MOTION_N_QUEUES; q++) {
-		level[q] = ring_count(&m->q[q]);
-		cap[q] = m->q[q].cap;
+		level[q] = queue_count(m, q);
+		cap[q] = queue_cap(m, q);
 	}
 }
 
@@ -413,8 +464,8 @@ void motion_get_stats(const struct motion *m, struct motion_stats *st)
 	st->peak[Q_STREAM] = atomic_load(&m->src.peak);
 	st->cap[Q_STREAM] = m->src.size;
 	for (unsigned q = 1; q < MOTION_N_QUEUES; q++) {
-		st->peak[q] = atomic_load(&m->q[q].peak);
-		st->cap[q] = m->q[q].cap;
+		st->peak[q] = queue_peak(m, q);
+		st->cap[q] = queue_cap(m, q);
 	}
 	sched_get_stats(m->sched, &ss);
 	st->n_tasks = (uint32_t)ss.n_tasks;

@@ -14,7 +14,9 @@
 #include "motion/motion.h"
 
 /* The queues of the chain, in order (MOTION_N_QUEUES): the stream, then
- * one ring between each two stages. */
+ * one ring between each two stages; Q_PROFILES and Q_SETPOINTS are the
+ * interpolation lanes' input and output rings, counted as one queue each
+ * (interp.h). */
 enum { Q_STREAM, Q_BLOCKS, Q_SEGS, Q_PLANNED, Q_PROFILES, Q_SETPOINTS };
 
 /* The first fault wins; later ones are dropped.  Both wake motion_wait(). */
@@ -32,5 +34,9 @@ void pipeline_notify_end(struct motion *m);
  * for now (the input is dry) or, in threaded mode, when the setpoint
  * supply runs low. */
 bool pipeline_starving(const struct motion *m);
+
+/* At rest at the end of a segment, with the next one not planned yet:
+ * stop there (a sample at rest, then idle) rather than wait for it. */
+bool pipeline_rest_now(const struct motion *m);
 
 #endif
