@@ -1,0 +1,454 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""CAN bus load per cycle and the highest axes x rate per bus with no SYNC
+missed (issue 22): the servo firmware as CANopen master in QEMU (without
+Linux, as tests/rpu_app/test_rpu_can_qemu.py runs it), its buses linked in
+lockstep to the drive simulator (docs/canlink.md, docs/fieldbus.md).
+
+    .venv/bin/python bench/fieldbus/can_bench.py [--cycles 2000]
+        [--rates 1000,2000,4000] [--drives 1-4] [--json bench/results/fieldbus.json]
+
+For each cycle rate, the firmware is built from a devicetree overlay of
+boards/zynq7000_qemu/servo.dts (cycle-period-us, the axes on CAN drives)
+in build/bench/fieldbus/; one QEMU boot measures two points, one per bus
+(CAN0 with n drives, CAN1 with m). A point the firmware's build refuses
+(gen_board_header.py: the worst-case SYNC + RPDO + TPDO bits of a cycle
+over the bus time of a period) is reported as refused, not run.
+
+Per point, after every drive is in "operation enabled" (app_debug.
+force_enable through the gdbstub), a window of --cycles cycles:
+  - from the firmware's `stats can=N` lines: SYNCs sent, SYNCs missed
+    (TX FIFO full), PDOs missing;
+  - from a passive canlink client on the bus (guest time, every frame the
+    guest sent and every answer): bits per cycle = the sum of
+    servoamp.canlink.frame_bits() of the frames between two SYNCs; load =
+    bits x bit time / period. Compared with the firmware's compile-time
+    estimate (BOARD_CANn_LOAD_PERMILLE) and the analytic figure (SYNC +
+    n x (RPDO + TPDO) of 6 bytes, without stuff bits).
+
+Guest time is virtual (-icount): the figures do not depend on the host.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "python"))
+sys.path.insert(0, str(REPO / "tests" / "rpu_app"))
+
+from servoamp import canlink  # noqa: E402
+
+BOARD = "zynq7000_qemu"
+BASE_DTS = REPO / "boards" / BOARD / "servo.dts"
+BITRATE = 1_000_000
+SYNC_ID = 0x080
+STATS_CYCLES = 1000     # servo.dts stats-cycles: one statistics line per bus every 1000 cycles
+CAN_RE = re.compile(r"^stats can=(\d) nodes_op=(\d+) sync=(\d+) sync_missed=(\d+) rpdo=(\d+) rpdo_missed=(\d+) "
+                    r"tpdo=(\d+) pdo_missing=(\d+) pdo_missing_max=(\d+) emcy=(\d+) hb_timeouts=(\d+) "
+                    r"faults=(\d+) sdo_ok=(\d+) sdo_fail=(\d+) rx_bad=(\d+)$", re.M)
+CAN_FIELDS = ("nodes_op", "sync", "sync_missed", "rpdo", "rpdo_missed", "tpdo", "pdo_missing",
+              "pdo_missing_max", "emcy", "hb_timeouts", "faults", "sdo_ok", "sdo_fail", "rx_bad")
+# CANopen function codes (COB-ID & 0x780) of the frames on the bus
+KINDS = {0x000: "nmt", 0x080: "emcy", 0x180: "tpdo1", 0x200: "rpdo1", 0x580: "sdo", 0x600: "sdo",
+         0x700: "heartbeat"}
+CYCLE_RE = re.compile(r"^stats cycle=(\d+) guest_us=(\d+) .*missed=(\d+)", re.M)
+
+
+def bits_unstuffed(dlc: int) -> int:
+    """Bits of a standard data frame without stuff bits (SOF..EOF + IFS)."""
+    return 34 + 8 * dlc + canlink.TRAILER_BITS
+
+
+def bits_worst(dlc: int) -> int:
+    """gen_board_header.py's worst case (every possible stuff bit)."""
+    unstuffed = 34 + 8 * dlc
+    return unstuffed + (unstuffed - 1) // 4 + 13
+
+
+def analytic_bits(n: int) -> tuple[int, int]:
+    """(nominal without stuffing, worst case) bits of one cycle with n drives:
+    SYNC + n x (RPDO1 + TPDO1), both 6 bytes."""
+    return bits_unstuffed(0) + 2 * n * bits_unstuffed(6), bits_worst(0) + 2 * n * bits_worst(6)
+
+
+# ---- builds -----------------------------------------------------------------
+
+def overlay(period_us: int, drives: dict[int, int]) -> str:
+    """servo.dts with ``drives[bus]`` CAN axes on each bus (node ids 1..n),
+    the remaining of axes 0..3 on the model, and ``period_us``."""
+    lines = [f'/include/ "{BASE_DTS}"', "", "&servo {", f"\tcycle-period-us = <{period_us}>;", "};", ""]
+    idx = 0
+    extra = []
+    for bus in sorted(drives):
+        for node in range(1, drives[bus] + 1):
+            body = (f'\tservoamp,backend = "can";\n\tservoamp,can-bus = <{bus}>;\n'
+                    f"\tservoamp,node-id = <{node}>;\n")
+            if idx < 4:
+                lines += [f"&axis{idx} {{", body.rstrip("\n"), "};", ""]
+            else:
+                extra.append(f"\taxis@{idx} {{\n\t\tcompatible = \"servoamp,servo-axis\";\n\t\treg = <{idx}>;\n"
+                             + body.replace("\t", "\t\t") + "\t};\n")
+            idx += 1
+    if extra:
+        lines += ["&servo {", *extra, "};", ""]
+    return "\n".join(lines)
+
+
+@dataclass
+class Build:
+    period_us: int
+    drives: dict[int, int]
+    dir: Path
+    ok: bool = False
+    why: str = ""
+    load_permille: dict[int, int] = field(default_factory=dict)
+
+    @property
+    def mask(self) -> int:
+        return (1 << sum(self.drives.values())) - 1
+
+
+def build(period_us: int, drives: dict[int, int], root: Path, jobs: int) -> Build:
+    name = f"p{period_us}-" + "-".join(f"can{b}x{n}" for b, n in sorted(drives.items()))
+    d = root / name
+    d.mkdir(parents=True, exist_ok=True)
+    dts = d / "servo-bench.dts"
+    text = overlay(period_us, drives)
+    if not dts.exists() or dts.read_text() != text:
+        dts.write_text(text)
+    out = d / BOARD
+    r = subprocess.run(["make", "-C", str(REPO / "rpu_app"), f"-j{jobs}", f"BOARD={BOARD}", f"BUILD={out}",
+                        f"DTS={dts}", f"PYTHON={sys.executable}"], capture_output=True, text=True)
+    b = Build(period_us, drives, out)
+    if r.returncode:
+        m = re.search(r"bus \d+: \d+ axes need up to \d+ bit times per cycle, \d+ available[^\n]*", r.stderr + r.stdout)
+        if not m:
+            raise RuntimeError(f"make for {dts} failed:\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}")
+        b.why = m.group(0)
+        return b
+    b.ok = True
+    hdr = (out / "board_config.h").read_text()
+    for m2 in re.finditer(r"^#define BOARD_CAN(\d)_LOAD_PERMILLE BOARD_U\((\d+)\)", hdr, re.M):
+        b.load_permille[int(m2.group(1))] = int(m2.group(2))
+    return b
+
+
+# ---- one run ----------------------------------------------------------------
+
+class Tap(threading.Thread):
+    """A passive canlink client: every frame on one bus, (t_ns end, can_id,
+    bits). Reads all the time (QEMU drops a client whose socket fills)."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(daemon=True)
+        self.path = path
+        self.frames: list[tuple[int, int, int]] = []
+        self.error = ""
+        self.link: canlink.Link | None = None
+
+    def run(self) -> None:
+        try:
+            deadline = time.monotonic() + 60
+            while not self.path.exists():
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"{self.path} never appeared")
+                time.sleep(0.05)
+            self.link = canlink.Link.connect(str(self.path), active=False, name="bench", timeout=60)
+            while True:
+                rec = self.link.recv(None)
+                if rec is None or rec.type == canlink.BYE:
+                    return
+                bits = canlink.frame_bits(rec.can_id, rec.eff, rec.rtr, rec.dlc, b"" if rec.rtr else rec.data)
+                self.frames.append((rec.t_ns, rec.can_id, bits))
+        except (canlink.ProtocolError, OSError, TimeoutError) as e:
+            self.error = str(e)
+
+
+def can_stats(text: str, bus: int) -> list[dict[str, int]]:
+    return [dict(zip(CAN_FIELDS, map(int, m.groups()[1:]))) for m in CAN_RE.finditer(text) if int(m.group(1)) == bus]
+
+
+def bus_load(frames: list[tuple[int, int, int]], t0_ns: int, t1_ns: int, period_us: int) -> dict[str, Any]:
+    """Bits per cycle from SYNC to SYNC (guest frames and answers by their
+    end on the bus) within [t0, t1]."""
+    syncs = [t for t, cid, _ in frames if cid == SYNC_ID and t0_ns <= t <= t1_ns]
+    if len(syncs) < 3:
+        return {"error": f"{len(syncs)} SYNCs seen in the window"}
+    per: list[int] = []
+    j = 0
+    fr = sorted(f for f in frames if syncs[0] < f[0] <= syncs[-1])
+    for k in range(1, len(syncs)):
+        s = 0
+        while j < len(fr) and fr[j][0] <= syncs[k]:
+            s += fr[j][2]
+            j += 1
+        per.append(s)
+    kinds: dict[str, int] = {}
+    for _, cid, bits in fr:
+        kind = KINDS.get(cid & 0x780, "other") if cid != SYNC_ID else "sync"
+        kinds[kind] = kinds.get(kind, 0) + bits
+    per.sort()
+    mean = sum(per) / len(per)
+    gaps = [b - a for a, b in zip(syncs, syncs[1:])]
+    bit_ns = 1e9 / BITRATE
+    return {
+        "cycles": len(per), "bits_mean": round(mean, 1), "bits_min": per[0],
+        "bits_p50": per[len(per) // 2], "bits_max": per[-1],
+        "load_mean_pct": round(100 * mean * bit_ns / (period_us * 1000), 2),
+        "load_max_pct": round(100 * per[-1] * bit_ns / (period_us * 1000), 2),
+        "sync_gap_ns": {"min": min(gaps), "max": max(gaps), "mean": round(sum(gaps) / len(gaps))},
+        "bits_per_cycle_by_kind": {k: round(v / len(per), 1) for k, v in sorted(kinds.items())},
+        "ids": sorted({f"{cid:#05x}" for _, cid, _ in fr}),
+    }
+
+
+def run_boot(b: Build, cycles: int, workdir: Path, log: Any) -> dict[int, dict[str, Any]]:
+    qr: Any = importlib.import_module("qemu_rpu")  # tests/rpu_app (untyped)
+    QemuRpu, _symbol = qr.QemuRpu, qr._symbol
+
+    sockdir = Path(tempfile.mkdtemp(prefix="canbench-"))
+    sims: list[subprocess.Popen[bytes]] = []
+    taps: dict[int, Tap] = {}
+    out: dict[int, dict[str, Any]] = {}
+    try:
+        links: dict[int, Path] = {}
+        for bus, n in sorted(b.drives.items()):
+            links[bus] = sockdir / f"can{bus}.sock"
+            slog = open(workdir / f"drivesim{bus}.log", "w")
+            sims.append(subprocess.Popen([sys.executable, "-m", "servoamp.drivesim", "--socket", str(links[bus]),
+                                          "--nodes", f"1-{n}", "--wait", "120", "-v"], stdout=slog,
+                                         stderr=subprocess.STDOUT, cwd=REPO))
+            taps[bus] = Tap(links[bus])
+            taps[bus].start()
+        elf = b.dir / "servo.elf"
+        t_host = time.monotonic()
+        with QemuRpu(workdir / "q", b.dir / "qemu-stub.elf", elf, can_links=links,
+                     can_link_opts={"timeout-ms": 2000}) as q:
+            q.wait_uart(r"^running:", timeout=60)
+            g = q.attach_gdb()
+            g.interrupt()
+            g.select_cpu(0)
+            g.write32(_symbol(elf, "app_debug"), b.mask)
+            g.cont()
+            n_axes = sum(b.drives.values())
+            q.wait_uart(r"^axis\d+: can\d node \d+: operation enabled, error 0000", count=n_axes, timeout=300)
+            last_bus = max(b.drives)
+            last = rf"^stats canps={last_bus} "
+            n0 = len(re.findall(last, q.uart_text(), re.M))
+            intervals = max(1, round(cycles / STATS_CYCLES))
+            # one full interval to settle, then the window
+            q.wait_uart(last, count=n0 + 1 + intervals, timeout=60 + cycles * b.period_us / 1e6 * 60)
+            text = q.uart_text()
+            host_s = time.monotonic() - t_host
+        log.write(text)
+        cyc = [tuple(map(int, m.groups())) for m in CYCLE_RE.finditer(text)]
+        c0, c1 = cyc[n0], cyc[n0 + intervals]
+        t0_ns, t1_ns = c0[1] * 1000, c1[1] * 1000
+        for bus, n in sorted(b.drives.items()):
+            st = can_stats(text, bus)
+            a, z = st[n0], st[n0 + intervals]
+            d = {k: z[k] - a[k] for k in ("sync", "sync_missed", "rpdo", "rpdo_missed", "tpdo", "pdo_missing",
+                                         "emcy", "hb_timeouts", "faults", "rx_bad")}
+            taps[bus].join(timeout=5)
+            load = bus_load(taps[bus].frames, t0_ns, t1_ns, b.period_us)
+            nominal, worst = analytic_bits(n)
+            out[bus] = {
+                "drives": n, "period_us": b.period_us, "rate_hz": round(1e6 / b.period_us),
+                "window": {"cycles": c1[0] - c0[0], "guest_us": c1[1] - c0[1], "servo_missed": c1[2] - c0[2],
+                           "host_s_whole_boot": round(host_s, 1)},
+                "stats": d, "nodes_op": z["nodes_op"],
+                "bus": load, "tap_error": taps[bus].error,
+                "analytic_bits": {"nominal_unstuffed": nominal, "worst_case": worst},
+                "analytic_load_pct": {"nominal_unstuffed": round(100 * nominal / b.period_us, 2),
+                                      "worst_case": round(100 * worst / b.period_us, 2)},
+                "firmware_load_permille": b.load_permille.get(bus),
+                "pass": d["sync_missed"] == 0 and z["nodes_op"] == n and d["sync"] > 0,
+            }
+    finally:
+        for s in sims:
+            s.terminate()
+            try:
+                s.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                s.kill()
+        shutil.rmtree(sockdir, ignore_errors=True)
+    return out
+
+
+# ---- the sweep ----------------------------------------------------------------
+
+AXES_IN_USE = 4   # the firmware cycles the first "axes" (parameter, default 4) axes; the rest stay disabled
+
+
+def boots_for(drives: list[int]) -> list[dict[int, int]]:
+    """Two points per boot where they fit: CAN0 and CAN1, at most
+    AXES_IN_USE drives in all (without Linux nobody raises "axes")."""
+    ds = sorted(drives)
+    boots = []
+    while ds:
+        a = ds.pop(-1)
+        b = next((x for x in ds if a + x <= AXES_IN_USE), None)
+        if b is not None:
+            ds.remove(b)
+        boots.append({0: a} if b is None else {0: a, 1: b})
+    return sorted(boots, key=lambda c: sorted(c.values()))
+
+
+def parse_range(s: str) -> list[int]:
+    out: list[int] = []
+    for part in s.split(","):
+        if "-" in part:
+            lo, hi = part.split("-")
+            out += range(int(lo), int(hi) + 1)
+        else:
+            out.append(int(part))
+    return out
+
+
+def figures(points: list[dict[str, Any]], rates: list[int]) -> list[dict[str, Any]]:
+    f: list[dict[str, Any]] = []
+    for p in points:
+        if p.get("refused"):
+            continue
+        tag = f"{p['drives']}drives_{p['rate_hz'] // 1000}khz"
+        bus = p["bus"]
+        if "bits_mean" in bus:
+            f.append({"name": f"load_pct_{tag}", "value": bus["load_mean_pct"], "unit": "%", "better": "lower",
+                      "note": f"{bus['bits_mean']:.0f} bits/cycle mean, max {bus['bits_max']} ({bus['load_max_pct']} %); "
+                              f"firmware estimate {p['firmware_load_permille'] / 10:.1f} %, analytic "
+                              f"{p['analytic_load_pct']['nominal_unstuffed']} % unstuffed"})
+        f.append({"name": f"sync_missed_{tag}", "value": p["stats"]["sync_missed"], "unit": "cycles",
+                  "better": "lower", "note": f"of {p['stats']['sync']} SYNCs; pdo_missing {p['stats']['pdo_missing']}"})
+    for r in rates:
+        ok = [p["drives"] for p in points if p["rate_hz"] == r and p.get("pass")]
+        f.append({"name": f"max_drives_per_bus_{r // 1000}khz", "value": max(ok, default=0), "unit": "drives",
+                  "better": "higher", "note": "most drives on one bus with 0 SYNC missed (points the build refuses count as failed)"})
+        ok2 = [p["drives"] for p in points if p["rate_hz"] == r and p.get("pass") and p["stats"]["pdo_missing"] == 0]
+        f.append({"name": f"max_drives_per_bus_{r // 1000}khz_no_pdo_missing", "value": max(ok2, default=0),
+                  "unit": "drives", "better": "higher",
+                  "note": "the same, and every TPDO of every cycle received before the next cycle"})
+    best = max((p["drives"] * p["rate_hz"] for p in points if p.get("pass")), default=0)
+    f.append({"name": "max_axes_x_rate_per_bus", "value": best, "unit": "1/s", "better": "higher",
+              "note": "highest drives x cycle rate on one bus with 0 SYNC missed"})
+    return f
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cycles", type=int, default=2000, help="window per point, cycles (a multiple of 1000)")
+    ap.add_argument("--rates", default="1000,2000,4000", help="cycle rates, Hz")
+    ap.add_argument("--drives", default="1-5", help="drives per bus to try")
+    ap.add_argument("--quick", action="store_true", help="1 kHz, 1-2 drives, 1000 cycles (a smoke run)")
+    ap.add_argument("--json", type=Path)
+    ap.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench" / "fieldbus")
+    ap.add_argument("-j", "--jobs", type=int, default=2)
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.rates, args.drives, args.cycles = "1000", "1-2", 1000
+    os.environ.setdefault("PYTHONPATH", str(REPO / "python"))
+    if str(REPO / "python") not in os.environ["PYTHONPATH"].split(os.pathsep):
+        os.environ["PYTHONPATH"] = os.pathsep.join([str(REPO / "python"), os.environ["PYTHONPATH"]])
+    from servoamp import qemu
+
+    if not os.environ.get("SERVOAMP_QEMU"):
+        os.environ["SERVOAMP_QEMU"] = str(qemu.project_qemu() / "bin" / "qemu-system-arm")
+    rates = parse_range(args.rates)
+    drives = parse_range(args.drives)
+    args.build_dir.mkdir(parents=True, exist_ok=True)
+    t_start = time.monotonic()
+    points: list[dict[str, Any]] = []
+    for rate in rates:
+        period = round(1e6 / rate)
+        # a point the build refuses (the generator's worst-case check,
+        # reproduced here so that no firmware is built just to be refused)
+        runnable: list[int] = []
+        for n in drives:
+            nominal, worst = analytic_bits(n)
+            budget = BITRATE * period // 1_000_000
+            if worst > budget:
+                why = (f"{n} axes need up to {worst} bit times per cycle, {budget} available at "
+                       f"{BITRATE} bit/s and {period} us")
+                points.append({"drives": n, "period_us": period, "rate_hz": rate, "refused": why,
+                               "pass": False, "analytic_bits": {"nominal_unstuffed": nominal, "worst_case": worst}})
+                print(f"{rate} Hz, {n} drives/bus: refused by the build: {why}", flush=True)
+            else:
+                runnable.append(n)
+        for cfg2 in boots_for(runnable):
+            b = build(period, cfg2, args.build_dir, args.jobs)
+            if not b.ok:
+                raise RuntimeError(f"{cfg2} at {period} us refused: {b.why}")
+            wd = args.build_dir / "runs" / b.dir.parent.name
+            shutil.rmtree(wd, ignore_errors=True)
+            wd.mkdir(parents=True)
+            t0 = time.monotonic()
+            with open(wd / "uart1.log", "w") as log:
+                res = run_boot(b, args.cycles, wd, log)
+            for bus, p in res.items():
+                p["bus_index"] = bus
+                points.append(p)
+                bl = p["bus"]
+                print(f"{rate} Hz, {p['drives']} drives on can{bus}: sync {p['stats']['sync']} missed "
+                      f"{p['stats']['sync_missed']} pdo_missing {p['stats']['pdo_missing']}; "
+                      f"bits/cycle {bl.get('bits_mean')} (max {bl.get('bits_max')}) load {bl.get('load_mean_pct')} % "
+                      f"(firmware estimate {p['firmware_load_permille']} permille) "
+                      f"[{time.monotonic() - t0:.0f} s]", flush=True)
+    points.sort(key=lambda p: (p["rate_hz"], p["drives"]))
+    print()
+    print(table(points, rates))
+    doc = {
+        "benchmark": "fieldbus",
+        "command": "bench/fieldbus/can_bench.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "host": {"cpus": os.cpu_count(), "load_avg_at_start": os.getloadavg(), "machine": platform.machine()},
+        "bitrate": BITRATE, "window_cycles": args.cycles,
+        "host_seconds": round(time.monotonic() - t_start, 1),
+        "points": points,
+        "figures": figures(points, rates),
+    }
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(doc, indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+def table(points: list[dict[str, Any]], rates: list[int]) -> str:
+    rows = ["rate    drives  sync  missed  pdo_miss  bits/cycle mean/max  load %  fw est %  analytic % (unstuffed/worst)  result"]
+    for p in points:
+        a = p["analytic_bits"]
+        per = p["period_us"]
+        an = f"{100 * a['nominal_unstuffed'] / per:.1f} / {100 * a['worst_case'] / per:.1f}"
+        if p.get("refused"):
+            rows.append(f"{p['rate_hz']:>5}  {p['drives']:>6}  {'-':>4}  {'-':>6}  {'-':>8}  {'-':>19}  {'-':>6}  {'-':>8}  "
+                        f"{an:>29}  refused by the build")
+            continue
+        bl, st = p["bus"], p["stats"]
+        bits = f"{bl.get('bits_mean', '-')}/{bl.get('bits_max', '-')}"
+        rows.append(f"{p['rate_hz']:>5}  {p['drives']:>6}  {st['sync']:>4}  {st['sync_missed']:>6}  {st['pdo_missing']:>8}  "
+                    f"{bits:>19}  {bl.get('load_mean_pct', '-'):>6}  {p['firmware_load_permille'] / 10:>8.1f}  {an:>29}  "
+                    f"{'pass' if p['pass'] else 'FAIL'}")
+    rows.append("")
+    for r in rates:
+        ok = [p["drives"] for p in points if p["rate_hz"] == r and p.get("pass")]
+        ok2 = [p["drives"] for p in points if p["rate_hz"] == r and p.get("pass") and p["stats"]["pdo_missing"] == 0]
+        rows.append(f"highest passing at {r} Hz: {max(ok) if ok else 'none'} drives per bus"
+                    + (f" ({max(ok) * r} axes x Hz)" if ok else "")
+                    + f"; with no PDO missing either: {max(ok2) if ok2 else 'none'}")
+    return "\n".join(rows)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
