@@ -27,6 +27,17 @@ done
 # (maxcpus=1). The default kernel has no interrupt threads: nothing to set.
 irqprio cycle-interrupt 81 || echo "servoamp: irqprio cycle-interrupt failed"
 
+# PREEMPT_RT prints kernel messages to the console from a kthread, after
+# the fact: a line such as remoteproc's "crash detected" then lands in the
+# middle of a shell command's output line (the default kernel prints in
+# the caller's context, before the shell answers). Keep only emergencies
+# and alerts (soft lockups, workqueue lockups: the stall detectors) on the
+# console there; everything stays in dmesg.
+if [ "$(cat /sys/kernel/realtime 2>/dev/null)" = 1 ]; then
+	dmesg -n 3
+	echo "servoamp: PREEMPT_RT: console loglevel 3 (dmesg has every message)"
+fi
+
 cat >/etc/profile <<'EOF'
 export PATH=/bin:/sbin:/usr/bin:/usr/sbin
 export PS1='servoamp:\w# '
