@@ -175,8 +175,8 @@ static int run_sync(const struct motion_config *c, const char *prog, struct resu
 	double t0 = now_s(), c0 = cpu_s();
 	while ((st = motion_next_setpoint(m, &sp)) == MOTION_ST_MOVING ||
 	       st == MOTION_ST_IDLE)
-		for (unsigned k = 0; k < sp.n_axes; k++)
-			r->checksum += (uint64_t)(uint32_t)sp.pos[k];
+		if (st == MOTION_ST_MOVING)
+			r->checksum = motion_setpoint_hash(r->checksum, &sp);
 	r->wall = now_s() - t0;
 	r->cpu = cpu_s() - c0;
 	motion_get_stats(m, &s);

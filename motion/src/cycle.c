@@ -45,8 +45,7 @@ uint32_t sink_run(void *arg, unsigned worker)
 		struct ring *q = cur_out(m);
 		if ((c = ring_front(q)) == NULL)
 			break;
-		for (uint32_t k = 0; k < m->na; k++)
-			o->sink_sum += (uint64_t)(uint32_t)c[2 + k];
+		o->sink_sum = sp_hash(o->sink_sum, m->na, c);
 		memcpy(last, c, q->elem);
 		ring_release(q);
 		chunk_step(m, last);

@@ -105,6 +105,20 @@ static inline void sp_unpack(uint32_t n, const int32_t *c,
 	memcpy(sp->vel, c + 2 + n, n * sizeof(int32_t));
 }
 
+/* One step of motion_setpoint_hash() over a compact setpoint's words
+ * (line, pos[n], vel[n]; FNV-1a over 32-bit words). */
+static inline uint64_t sp_hash(uint64_t h, uint32_t n, const int32_t *c)
+{
+	const uint64_t prime = 1099511628211ull;
+
+	if (h == 0)
+		h = 14695981039346656037ull;
+	h = (h ^ (uint32_t)c[0]) * prime;
+	for (uint32_t k = 0; k < 2 * n; k++)
+		h = (h ^ (uint32_t)c[2 + k]) * prime;
+	return h;
+}
+
 /* Millimetres (or mm/s) times increments per mm to int32 increments,
  * rounded to nearest and saturated. */
 static inline int32_t to_inc(double v)

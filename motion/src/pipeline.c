@@ -489,6 +489,18 @@ int motion_trace_csv(const struct motion *m, FILE *f)
 	return sched_trace_csv(m->sched, f);
 }
 
+uint64_t motion_setpoint_hash(uint64_t h, const struct motion_setpoint *sp)
+{
+	int32_t c[2 + 2 * MOTION_MAX_AXES];
+	uint32_t n = sp->n_axes <= MOTION_MAX_AXES ? sp->n_axes : MOTION_MAX_AXES;
+
+	c[0] = (int32_t)sp->line;
+	c[1] = 0;
+	memcpy(c + 2, sp->pos, n * sizeof(int32_t));
+	memcpy(c + 2 + n, sp->vel, n * sizeof(int32_t));
+	return sp_hash(h, n, c);
+}
+
 uint64_t motion_sink_checksum(const struct motion *m)
 {
 	return m->out.sink_sum;

@@ -56,8 +56,7 @@ static int sync_checksum(const struct motion_config *c, const char *prog,
 		}
 		if (st != MOTION_ST_MOVING)
 			continue;
-		for (unsigned k = 0; k < sp.n_axes; k++)
-			*sum += (uint64_t)(uint32_t)sp.pos[k];
+		*sum = motion_setpoint_hash(*sum, &sp);
 		(*count)++;
 	}
 	motion_destroy(m);

@@ -14,6 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 BUILD = ROOT / "build" / "motion"
 TEST_BINARIES = (
     "test_gcode",
+    "test_lanes",
     "test_motion",
     "test_plan",
     "test_ring",

@@ -7,7 +7,8 @@ import pytest
 
 from motion_helpers import TEST_BINARIES, require, run_binary
 
-SHORT = {"MOTION_STREAM_LINES": "100000", "MOTION_STREAM_THREADED_LINES": "20000", "MOTION_RING_ITEMS": "500000"}
+SHORT = {"MOTION_STREAM_LINES": "100000", "MOTION_STREAM_THREADED_LINES": "20000", "MOTION_RING_ITEMS": "500000",
+         "MOTION_LANES_BLOCKS": "100"}
 SAN_ENV = {
     "ASAN_OPTIONS": "detect_leaks=1:abort_on_error=0:halt_on_error=1",
     "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1",
@@ -32,12 +33,14 @@ def test_asan_ubsan(binary: str) -> None:
         ("test_ring", ["spsc_threads"]),
         ("test_sched_threads", []),
         ("test_threads", []),
+        ("test_lanes", ["pool_matches_sync"]),
         ("test_stream", ["stream_threaded"]),
     ],
 )
 def test_tsan(binary: str, cases: list[str]) -> None:
     b = require("tsan")
-    env = {**SAN_ENV, "MOTION_STREAM_THREADED_LINES": "20000", "MOTION_RING_ITEMS": "200000"}
+    env = {**SAN_ENV, "MOTION_STREAM_THREADED_LINES": "20000", "MOTION_RING_ITEMS": "200000",
+           "MOTION_LANES_BLOCKS": "100"}
     proc = run_binary(b, binary, cases, env=env)
     out = proc.stdout + proc.stderr
     assert "WARNING: ThreadSanitizer" not in out, out[-6000:]

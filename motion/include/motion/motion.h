@@ -211,8 +211,12 @@ const char *motion_queue_name(unsigned q);
 /* CSV of queue levels over time: t_us,stream,blocks,segments,... */
 int motion_trace_csv(const struct motion *m, FILE *f);
 
-/* drain_sink mode: sum of all positions the sink consumed, for comparing
- * runs (benchmark and tests). */
+/* An order-sensitive hash of a run's setpoints (line, positions and
+ * velocities of the n_axes axes): h = motion_setpoint_hash(h, &sp) over
+ * the MOVING setpoints, from h = 0. */
+uint64_t motion_setpoint_hash(uint64_t h, const struct motion_setpoint *sp);
+/* drain_sink mode: motion_setpoint_hash() of every setpoint the sink
+ * consumed, for comparing runs (benchmark and tests). */
 uint64_t motion_sink_checksum(const struct motion *m);
 
 #ifdef __cplusplus
