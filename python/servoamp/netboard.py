@@ -27,10 +27,14 @@ fresh random token (``cb.token``) that it writes into the guest first.
 from __future__ import annotations
 
 import secrets
+import shutil
 import socket
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import IO, Any, Mapping, Sequence
 
 from servoamp import qemu
 from servoamp import telemetry as tw
@@ -79,7 +83,10 @@ class ControllerBoard:
     def __init__(self, board: qemu.Board | None = None, images: qemu.Images | None = None,
                  host_port: int | None = None, accel: str | None = "tcg,thread=single",
                  keep_logs: bool = False, extra_args: Sequence[str] = (),
-                 clock: str | None = None, icount: str | None = None) -> None:
+                 clock: str | None = None, icount: str | None = None,
+                 can_drives: Mapping[int, str] | None = None, can_log: bool = False,
+                 can_link_opts: Mapping[str, int] | None = None,
+                 drivesim_args: Sequence[str] = ()) -> None:
         self.board = board or qemu.Board.load("zynq7000_qemu")
         self.images = images
         self.host_port = host_port or free_port()
@@ -92,16 +99,45 @@ class ControllerBoard:
         self.boot_times: qemu.BootTimes | None = None
         self.prompt = str(self.board.data["linux"]["prompt"])
         self.token = secrets.token_hex(16)  # servod's --telemetry-token, per boot
+        # CAN (docs/canlink.md, docs/fieldbus.md): bus (0: CAN0, 1: CAN1) ->
+        # the drive simulator's --nodes on it; each bus linked in lockstep to
+        # its own servoamp-drivesim, and with can_log a passive python-can
+        # logger per bus writing run_dir/canN.asc (every frame on the bus)
+        self.can_drives = dict(can_drives or {})
+        self.can_log = can_log
+        self.can_link_opts = dict(can_link_opts or {})
+        self.drivesim_args = list(drivesim_args)
+        self.can_socks: dict[int, Path] = {}
+        self.can_procs: list[tuple[str, subprocess.Popen[bytes], IO[bytes]]] = []
+        self._can_dir: Path | None = None
 
     # -- lifecycle -------------------------------------------------------------------
     def start(self, timeout: float = 90.0) -> ControllerBoard:
         if self.images is None:
             self.images = qemu.prepare_images(self.board)
+        if self.can_drives:
+            # Unix socket names are short: a directory under /tmp
+            self._can_dir = Path(tempfile.mkdtemp(prefix="servoamp-can-"))
+            self.can_socks = {b: self._can_dir / f"can{b}.sock" for b in sorted(self.can_drives)}
         self.machine = qemu.QemuMachine(self.board, self.images, accel=self.accel,
                                         keep_logs=self.keep_logs, clock=self.clock,
-                                        icount=self.icount, extra_args=nic_args(self.host_port) + self.extra_args)
+                                        icount=self.icount, extra_args=nic_args(self.host_port) + self.extra_args,
+                                        can_links=self.can_socks or None,
+                                        can_link_opts=self.can_link_opts or None)
         self.machine.start()
         try:
+            # the drives connect while Linux boots: the firmware, started
+            # later through remoteproc, is the first to send on the bus
+            for b, nodes in sorted(self.can_drives.items()):
+                self._can_proc(f"drivesim{b}", [sys.executable, "-m", "servoamp.drivesim", "--socket",
+                                                str(self.can_socks[b]), "--nodes", nodes, "--wait", "60",
+                                                "--control", str(self._drive_ctl(b)), "-v",
+                                                *self.drivesim_args])
+                if self.can_log:
+                    assert self.machine.run_dir is not None
+                    self._can_proc(f"canlog{b}", [sys.executable, "-m", "can.logger", "-i", "servoamp",
+                                                  "-c", str(self.can_socks[b]), "-f",
+                                                  str(self.machine.run_dir / f"can{b}.asc")])
             self.boot_times = qemu.boot_to_shell(self.machine, timeout=timeout)
             bring_up(self.machine.uart(0), self.prompt, GUEST_ADDR, timeout=20)
         except BaseException:
@@ -110,10 +146,60 @@ class ControllerBoard:
             raise
         return self
 
+    def _can_proc(self, name: str, cmd: list[str]) -> None:
+        assert self.machine is not None and self.machine.run_dir is not None
+        log = open(self.machine.run_dir / f"{name}.log", "wb")
+        self.can_procs.append((name, subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
+                                                      cwd=qemu.REPO), log))
+
+    def _drive_ctl(self, bus: int) -> Path:
+        assert self._can_dir is not None
+        return self._can_dir / f"drives{bus}.ctl"
+
+    def drives(self, bus: int, request: str, timeout: float = 30.0) -> str:
+        """A request to the drive simulator of a bus ('fault NODE KIND',
+        'state': servoamp-drivesim --control); its answer ('ok ...'), or
+        QemuError."""
+        from servoamp.drivesim.__main__ import control_request
+
+        deadline = time.monotonic() + timeout
+        while True:     # the simulator makes its socket once QEMU's link is up
+            try:
+                ans = control_request(self._drive_ctl(bus), request, timeout)
+                break
+            except (FileNotFoundError, ConnectionRefusedError):
+                if time.monotonic() > deadline:
+                    raise qemu.QemuError(f"drive simulator of can{bus}: no control socket") from None
+                time.sleep(0.1)
+        if not ans.startswith("ok"):
+            raise qemu.QemuError(f"drive simulator of can{bus}: {request!r}: {ans}")
+        return ans
+
+    def can_log_path(self, bus: int) -> Path:
+        """The passive logger's ASC file of a bus (can_log=True)."""
+        assert self.machine is not None and self.machine.run_dir is not None
+        return self.machine.run_dir / f"can{bus}.asc"
+
     def stop(self) -> None:
         if self.machine is not None:
             self.machine.stop()
             self.machine = None
+        # QEMU said BYE when it quit: the simulators and loggers end on it
+        for name, proc, log in self.can_procs:
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+            log.close()
+        self.can_procs = []
+        if self._can_dir is not None:
+            shutil.rmtree(self._can_dir, ignore_errors=True)
+            self._can_dir = None
 
     def mark_failed(self) -> None:
         if self.machine is not None:

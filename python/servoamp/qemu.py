@@ -236,6 +236,10 @@ def build_test_firmware() -> list[Path]:
 # rpu_app's outputs (rpu_app/Makefile) and the names they get in the guest's
 # /lib/firmware: "rpu_app*.elf" names the firmware, where "servo.elf" would not.
 RPU_APP_IMAGES = {"servo.elf": "rpu_app.elf", "servo-norsc.elf": "rpu_app-norsc.elf"}
+# rpu_app's builds for one board: name suffix -> the servo devicetree in
+# boards/<board>/ ("": the board's own axes; "-can": its axes on CiA 402
+# drives over CAN, staged as rpu_app-can.elf, built when the board has one)
+RPU_APP_VARIANTS = {"": "servo.dts", "-can": "servo-can.dts"}
 
 
 def rpu_app_firmware(board: Board, build: bool = True) -> list[Path]:
@@ -243,16 +247,24 @@ def rpu_app_firmware(board: Board, build: bool = True) -> list[Path]:
     has one, staged under their /lib/firmware names. Empty when rpu_app
     has not been written yet."""
     mk = REPO / "rpu_app" / "Makefile"
-    if build and mk.exists():
-        _run(["make", "-s", "-C", REPO / "rpu_app", "-j2", f"BOARD={board.name}"])
-    src_dir = REPO / "build" / "rpu_app" / board.name
     stage = REPO / "build" / "firmware" / board.name
     found = []
-    for src, name in RPU_APP_IMAGES.items():
-        if (src_dir / src).exists():
-            stage.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(src_dir / src, stage / name)
-            found.append(stage / name)
+    for variant, dts in RPU_APP_VARIANTS.items():
+        dts_path = REPO / "boards" / board.name / dts
+        src_dir = REPO / "build" / "rpu_app" / (board.name + variant)
+        if not dts_path.exists():
+            continue
+        if build and mk.exists():
+            _run(["make", "-s", "-C", REPO / "rpu_app", "-j2", f"BOARD={board.name}",
+                  f"DTS={dts_path}", f"BUILD={src_dir}"])
+        for src, name in RPU_APP_IMAGES.items():
+            if variant and src != "servo.elf":
+                continue        # a variant's image with its resource table only
+            if (src_dir / src).exists():
+                staged = stage / name.replace("rpu_app", "rpu_app" + variant, 1)
+                stage.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(src_dir / src, staged)
+                found.append(staged)
     return found
 
 

@@ -14,12 +14,15 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
+import select
+import socket
 import sys
 import time
 from pathlib import Path
 
 from servoamp import canlink
-from servoamp.drivesim.drive import EDS, Drive, Frame, Injection
+from servoamp.drivesim.drive import EDS, FAULT_ALIASES, Drive, Frame, Injection
 
 
 def parse_nodes(text: str) -> list[int]:
@@ -54,7 +57,90 @@ def send(link: canlink.Link, frames: list[Frame]) -> None:
         link.send_frame(f.can_id, f.data, t_ns=f.t_ns)
 
 
-def serve(link: canlink.Link, drives: list[Drive]) -> int:
+class Control:
+    """``--control PATH``: a Unix socket taking one request line per
+    connection, answered with one line, then closed:
+
+    - ``fault NODE KIND``: inject KIND (following-error, over-current,
+      off-bus) into drive NODE with the next frame on the bus (its guest
+      time is the fault's; ``-v`` logs it);
+    - ``state``: each drive's node id, CiA 402 state, NMT state, off-bus.
+
+    Polled once per frame, so it acts only while the bus carries traffic
+    (the master's SYNC every cycle)."""
+
+    def __init__(self, path: str, drives: list[Drive]) -> None:
+        if os.path.exists(path):
+            os.unlink(path)
+        self.path = path
+        self.drives = {d.node_id: d for d in drives}
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.sock.bind(path)
+        self.sock.listen(4)
+        self.sock.setblocking(False)
+
+    def answer(self, line: str) -> str:
+        words = line.split()
+        if len(words) == 3 and words[0] == "fault":
+            try:
+                node = int(words[1], 0)
+            except ValueError:
+                return f"error: node {words[1]!r} is not a number"
+            kind = FAULT_ALIASES.get(words[2].lower())
+            if node not in self.drives:
+                return f"error: no drive {node} (drives {sorted(self.drives)})"
+            if kind is None:
+                return f"error: fault kind {words[2]!r} unknown"
+            self.drives[node].inject(kind)
+            return f"ok fault {node} {kind.value}"
+        if words == ["state"]:
+            return "ok " + "; ".join(f"{n}: {d.state.name} nmt={d.nmt.name} off_bus={int(d.off_bus)}"
+                                     for n, d in sorted(self.drives.items()))
+        return "error: requests are 'fault NODE KIND' and 'state'"
+
+    def poll(self) -> None:
+        while select.select([self.sock], [], [], 0)[0]:
+            try:
+                conn, _ = self.sock.accept()
+            except BlockingIOError:
+                return
+            with conn:
+                conn.settimeout(1.0)
+                try:
+                    req = b""
+                    while not req.endswith(b"\n") and len(req) < 256:
+                        chunk = conn.recv(256)
+                        if not chunk:
+                            break
+                        req += chunk
+                    conn.sendall((self.answer(req.decode("ascii", "replace").strip()) + "\n").encode())
+                except OSError:
+                    continue
+
+    def close(self) -> None:
+        self.sock.close()
+        try:
+            os.unlink(self.path)
+        except OSError:
+            pass
+
+
+def control_request(path: str | Path, line: str, timeout: float = 10.0) -> str:
+    """One request to a running simulator's --control socket; its answer."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        s.settimeout(timeout)
+        s.connect(str(path))
+        s.sendall(line.encode("ascii") + b"\n")
+        buf = b""
+        while not buf.endswith(b"\n"):
+            chunk = s.recv(4096)
+            if not chunk:
+                break
+            buf += chunk
+    return buf.decode("ascii", "replace").strip()
+
+
+def serve(link: canlink.Link, drives: list[Drive], control: Control | None = None) -> int:
     """The loop: until QEMU says BYE or closes the socket. Returns the
     number of frames handled."""
     log = logging.getLogger("servoamp.drivesim")
@@ -74,6 +160,8 @@ def serve(link: canlink.Link, drives: list[Drive]) -> int:
         if rec is None or rec.type == canlink.BYE:
             log.info("QEMU said BYE")
             return handled
+        if control is not None:
+            control.poll()
         answers: list[Frame] = []
         for d in drives:
             answers += d.on_frame(rec.can_id, rec.data, rec.t_ns, rtr=rec.rtr, eff=rec.eff)
@@ -94,6 +182,8 @@ def main(argv: list[str] | None = None) -> int:
                          "at guest time T_S seconds (repeatable)")
     ap.add_argument("--wait", type=float, default=10.0,
                     help="seconds to wait for the socket to appear (default 10)")
+    ap.add_argument("--control", metavar="PATH",
+                    help="Unix socket for requests while running: 'fault NODE KIND', 'state'")
     ap.add_argument("-v", "--verbose", action="store_true", help="log state changes and faults")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
@@ -112,8 +202,13 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, canlink.ProtocolError) as exc:
         print(f"servoamp-drivesim: {args.socket}: {exc}", file=sys.stderr)
         return 1
-    with link:
-        n = serve(link, drives)
+    control = Control(args.control, drives) if args.control else None
+    try:
+        with link:
+            n = serve(link, drives, control)
+    finally:
+        if control is not None:
+            control.close()
     logging.getLogger("servoamp.drivesim").info("%d frames handled", n)
     return 0
 

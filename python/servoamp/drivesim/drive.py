@@ -344,6 +344,11 @@ class Drive:
         self.hb_next_ns = self.t_ns + period * 1_000_000 if period else None
         return [] if self.off_bus else [Frame(0x700 + self.node_id, b"\x00")]
 
+    def inject(self, kind: FaultKind) -> None:
+        """A fault now: applied with the next frame the drive sees (the
+        control socket of servoamp-drivesim: tests on a running board)."""
+        self.injections.insert(0, Injection(self.node_id, kind, 0))
+
     def on_frame(self, can_id: int, data: bytes, t_ns: int, rtr: bool = False,
                  eff: bool = False) -> list[Frame]:
         """Handle one frame on the bus at guest time ``t_ns``; the frames the
