@@ -180,7 +180,7 @@ def test_mypy_strict() -> None:
     import sys
     top = Path(__file__).resolve().parents[2]
     mods = [top / "python/servoamp/canlink.py", top / "python/servoamp/canbus.py",
-            top / "python/servoamp/drivesim", top / "tests/fieldbus"]
+            top / "python/servoamp/canload.py", top / "python/servoamp/drivesim", top / "tests/fieldbus"]
     p = subprocess.run([str(Path(sys.executable).parent / "mypy"), "--strict", *map(str, mods)],
                        capture_output=True, text=True, cwd=top, timeout=600)
     assert p.returncode == 0, p.stdout + p.stderr
