@@ -28,6 +28,7 @@
 #include <unistd.h>
 
 #include "motion/motion.h"
+#include "scheduler.h" /* sched_decide(): the model runs the real rules */
 #include "servoamp/mono_clock.h"
 
 static double now_s(void)
@@ -192,7 +193,8 @@ static int run_sync(const struct motion_config *c, const char *prog, struct resu
 }
 
 static int run_pool(struct motion_config c, const char *prog, unsigned workers,
-		    enum motion_policy pol, uint32_t min_job, struct result *r)
+		    enum motion_policy pol, uint32_t min_job, uint32_t lanes,
+		    struct result *r)
 {
 	struct motion *m;
 	struct motion_error e;
@@ -202,6 +204,7 @@ static int run_pool(struct motion_config c, const char *prog, unsigned workers,
 	c.drain_sink = true;
 	c.policy = pol;
 	c.min_job = min_job;
+	c.interp_lanes = lanes;
 	if (motion_create(&c, &m, &e) || motion_load_program(m, prog, strlen(prog)))
 		return -1;
 	double t0 = now_s(), c0 = cpu_s();
@@ -242,6 +245,8 @@ static int run_pool(struct motion_config c, const char *prog, unsigned workers,
 	return rc;
 }
 
+#define N_CFG 6
+
 /* Figures of one scheduler experiment (one program, one profile kind). */
 struct sched_figures {
 	const char *key, *profile;
@@ -250,17 +255,169 @@ struct sched_figures {
 		unsigned w;
 		enum motion_policy pol;
 		uint32_t min_job; /* 0: the default (whole jobs of batch items) */
+		uint32_t lanes;   /* interpolation lanes */
 		struct result best;
-	} cf[5];
+	} cf[N_CFG];
 	struct result ref;
-	double inflation, sched_share, sp_h, sp_r2, sp_f, bound, calib;
+	double inflation, sched_share, sp_h, sp_r2, sp_f, sp_1lane, bound, calib;
 	double share[MOTION_N_TASKS];
+	/* the N-worker model (model_print()) */
+	double cost_ms[MOTION_N_TASKS]; /* CPU time per task, 1 worker */
+	double model[9], model_adj[9], model_one[9]; /* by workers, 1..8 */
 };
 
-/* Runs the program on the pool in five configurations (hybrid on 1 and W
- * workers, FIFO on 1 and W, hybrid with rule 2 as written on W), R times
- * interleaved, best time each; checks every run's setpoints against the
- * synchronous run, and prints the figures. */
+/* ---- the N-worker model ------------------------------------------------
+ *
+ * From the per-task costs of the 1-worker run (CPU time: each task's share
+ * of the time in jobs times the run's CPU time, so that a preempted run
+ * still gives its costs).  The serial tasks (decode, fit, look-ahead,
+ * accel, sink) run on one core at a time (rule 1); the interpolation
+ * lanes' work splits over min(N, lanes) cores.  Over a long program the
+ * time on N workers is at least each of
+ *   W / N               (all the work over N cores),
+ *   C_max               (the largest serial task),
+ *   C_interp / lanes    (the interpolation, one lane per worker: lanes = N),
+ * and the model takes the largest (a critical-path bound for a pipeline
+ * whose fill and drain are short against the run).  "Adjusted" inflates
+ * every cost by f(N) = 1 + (i2 - 1)(N - 1), where i2 is the measured time
+ * in jobs on 2 workers over 1 worker: each further core costs what the
+ * second one did.  "One interp task" is the same bound with the
+ * interpolation as one serial task (the design before the lanes). */
+static double model_bound(double W, double cmax, double interp, unsigned n,
+			  unsigned lanes)
+{
+	double t = W / n;
+	if (cmax > t)
+		t = cmax;
+	if (interp / lanes > t)
+		t = interp / lanes;
+	return t > 0 ? W / t : 0;
+}
+
+static void model_print(struct sched_figures *x, unsigned workers)
+{
+	const struct result *h1 = &x->cf[0].best;
+	double W = 0, cmax = 0, interp = 0;
+	const char *cmax_name = "?";
+
+	for (unsigned t = 0; t < h1->n_tasks; t++) {
+		double c = x->share[t] * h1->cpu * 1e3;
+		x->cost_ms[t] = c;
+		W += c;
+		if (!strncmp(h1->names[t], "interp", 6)) {
+			interp += c;
+		} else if (c > cmax) {
+			cmax = c;
+			cmax_name = h1->names[t];
+		}
+	}
+	double i2 = workers >= 2 && x->inflation > 1 ? x->inflation : 1.0;
+	printf("  N-worker model from the 1-worker costs (CPU ms: total %.1f, largest serial task %s %.1f, interpolation %.1f over the lanes; i2 = %.2f):\n",
+	       W, cmax_name, cmax, interp, i2);
+	printf("    workers    ");
+	for (unsigned n = 1; n <= 8; n++)
+		printf(" %5u", n);
+	printf("\n    bound      ");
+	for (unsigned n = 1; n <= 8; n++) {
+		x->model[n] = model_bound(W, cmax, interp, n, n);
+		printf(" %5.2f", x->model[n]);
+	}
+	printf("\n    adjusted   ");
+	for (unsigned n = 1; n <= 8; n++) {
+		x->model_adj[n] = x->model[n] / (1.0 + (i2 - 1.0) * (n - 1));
+		printf(" %5.2f", x->model_adj[n]);
+	}
+	printf("\n    one interp ");
+	for (unsigned n = 1; n <= 8; n++) {
+		double c1 = interp > cmax ? interp : cmax;
+		x->model_one[n] = model_bound(W, c1, interp, n, 1);
+		printf(" %5.2f", x->model_one[n]);
+	}
+	printf("\n");
+	if (workers <= 8)
+		printf("    measured on %u workers: %.3f, %.0f%% of the bound, %.0f%% of the adjusted figure\n",
+		       workers, x->sp_h, 100.0 * x->sp_h / x->model[workers],
+		       100.0 * x->sp_h / x->model_adj[workers]);
+}
+
+/* The source design's workload (seed 003): 6 chained data tasks, 150
+ * items placed upstream, every job one item of the same cost (a delay
+ * loop).  An event simulation on n workers with the hybrid rules
+ * (sched_decide(), the library's own) and queues of `cap` items; returns
+ * the makespan in job costs.  Its speed-up on 4 is the model's figure for
+ * the source's 3.895. */
+#define SRC_TASKS 6
+static double model_source(unsigned n, int items, uint32_t cap)
+{
+	uint32_t q[SRC_TASKS + 1] = { (uint32_t)items };
+	bool running[SRC_TASKS] = { false };
+	double end[SRC_TASKS] = { 0 };
+	uint64_t last[SRC_TASKS] = { 0 }, seq = 0;
+	unsigned idle = n;
+	double t = 0;
+
+	for (;;) {
+		while (idle > 0) {
+			struct sched_dstate d[SRC_TASKS];
+			for (int i = 0; i < SRC_TASKS; i++) {
+				d[i].order = (uint8_t)i;
+				d[i].ul = q[i];
+				d[i].dl = i + 1 == SRC_TASKS ? 0 : q[i + 1];
+				d[i].dcap = i + 1 == SRC_TASKS ? 1 : cap;
+				d[i].running = running[i];
+				d[i].last = last[i];
+			}
+			struct sched_choice c = sched_decide(MOTION_POLICY_HYBRID, NULL, 0,
+							     d, SRC_TASKS);
+			if (c.kind != SCHED_CHOICE_DATA)
+				break;
+			running[c.index] = true;
+			last[c.index] = ++seq;
+			q[c.index]--;
+			end[c.index] = t + 1.0;
+			idle--;
+		}
+		double next = -1;
+		for (int i = 0; i < SRC_TASKS; i++)
+			if (running[i] && (next < 0 || end[i] < next))
+				next = end[i];
+		if (next < 0)
+			break;
+		t = next;
+		for (int i = 0; i < SRC_TASKS; i++)
+			if (running[i] && end[i] <= t) {
+				running[i] = false;
+				q[i + 1]++;
+				idle++;
+			}
+	}
+	return t;
+}
+
+static double source_speedup[9];
+
+static void model_source_print(void)
+{
+	const int items = 150;
+	double t1 = model_source(1, items, 1000);
+
+	printf("source design's workload (seed 003: 6 equal chained tasks, 150 items upstream, 3.895x measured on 4 cores), simulated with the hybrid rules:\n    workers    ");
+	for (unsigned n = 1; n <= 8; n++)
+		printf(" %5u", n);
+	printf("\n    speed-up   ");
+	for (unsigned n = 1; n <= 8; n++) {
+		source_speedup[n] = t1 / model_source(n, items, 1000);
+		printf(" %5.3f", source_speedup[n]);
+	}
+	printf("\n    on 4 workers: %.3f predicted against 3.895 measured (%.1f%%)\n",
+	       source_speedup[4], 100.0 * 3.895 / source_speedup[4]);
+}
+
+/* Runs the program on the pool in six configurations (hybrid on 1 and W
+ * workers, FIFO on 1 and W, hybrid with rule 2 as written on W, hybrid on
+ * 1 worker with 1 interpolation lane), R times interleaved, best time
+ * each; checks every run's setpoints against the synchronous run, and
+ * prints the figures. */
 static int sched_experiment(const struct motion_config *h, const char *prog,
 			    unsigned workers, int reps, struct sched_figures *x)
 {
@@ -274,6 +431,11 @@ static int sched_experiment(const struct motion_config *h, const char *prog,
 	/* the hybrid scheduler's rule 2 as written: a task may run on a single item */
 	cf[4].name = "hybrid_n_rule2"; cf[4].w = workers; cf[4].pol = MOTION_POLICY_HYBRID;
 	cf[4].min_job = 1;
+	/* the pipeline as it was before the lanes, on 1 worker */
+	cf[5].name = "hybrid_1_1lane"; cf[5].w = 1; cf[5].pol = MOTION_POLICY_HYBRID;
+	for (int i = 0; i < N_CFG; i++)
+		cf[i].lanes = cf[i].lanes ? cf[i].lanes : (workers > 1 ? workers : 2);
+	cf[5].lanes = 1;
 	struct result *ref = &x->ref;
 	if (run_sync(h, prog, ref))
 		return 1;
@@ -281,9 +443,10 @@ static int sched_experiment(const struct motion_config *h, const char *prog,
 	for (int k = 0; k < reps; k++) {
 		double cal = calibrate(workers);
 		x->calib = cal > x->calib ? cal : x->calib;
-		for (int i = 0; i < 5; i++) {
+		for (int i = 0; i < N_CFG; i++) {
 			struct result r;
-			if (run_pool(*h, prog, cf[i].w, cf[i].pol, cf[i].min_job, &r)) {
+			if (run_pool(*h, prog, cf[i].w, cf[i].pol, cf[i].min_job,
+				     cf[i].lanes, &r)) {
 				fprintf(stderr, "%s failed\n", cf[i].name);
 				return 1;
 			}
@@ -299,10 +462,10 @@ static int sched_experiment(const struct motion_config *h, const char *prog,
 	printf("planning-heavy program, %s profiles: %llu arcs/lines, %llu segments, %llu setpoints\n",
 	       x->profile, (unsigned long long)ref->blocks, (unsigned long long)ref->segments,
 	       (unsigned long long)ref->setpoints);
-	for (int i = 0; i < 5; i++) {
+	for (int i = 0; i < N_CFG; i++) {
 		const struct result *b = &cf[i].best;
-		printf("  %-14s %u worker(s): %.3f s wall, %.3f s cpu, jobs per worker %llu/%llu, idle waits %llu/%llu\n",
-		       cf[i].name, cf[i].w, b->wall, b->cpu,
+		printf("  %-14s %u worker(s), %u lane(s): %.3f s wall, %.3f s cpu, jobs per worker %llu/%llu, idle waits %llu/%llu\n",
+		       cf[i].name, cf[i].w, cf[i].lanes, b->wall, b->cpu,
 		       (unsigned long long)b->jobs[0], (unsigned long long)b->jobs[1],
 		       (unsigned long long)b->idle[0], (unsigned long long)b->idle[1]);
 		printf("                 worker time in jobs / scheduler path / asleep (ms):");
@@ -345,14 +508,18 @@ static int sched_experiment(const struct motion_config *h, const char *prog,
 	x->sp_h = cf[0].best.wall / cf[1].best.wall;
 	x->sp_r2 = cf[0].best.wall / cf[4].best.wall;
 	x->sp_f = cf[3].best.wall / cf[1].best.wall;
+	x->sp_1lane = cf[5].best.wall / cf[1].best.wall;
 	double bound = mx ? (double)tot / (double)mx : 0;
 	x->bound = bound < workers ? bound : (double)workers;
 	printf("  speed-up hybrid %u vs 1 worker: %.3f (bound from the largest task: %.2f)\n",
 	       workers, x->sp_h, x->bound);
 	printf("  speed-up without whole jobs (rule 2 as written): %.3f\n", x->sp_r2);
 	printf("  hybrid vs plain FIFO, %u workers: %.3f\n", workers, x->sp_f);
+	printf("  speed-up over 1 worker with 1 lane (the serial interpolator's pipeline): %.3f; 1 worker, 1 lane / %u lanes: %.3f\n",
+	       x->sp_1lane, cf[0].lanes, cf[5].best.wall / cf[0].best.wall);
 	printf("  calibration: %u threads of independent arithmetic ran %.2fx faster than one"
 	       " (what the machine offered during the runs)\n", workers, x->calib);
+	model_print(x, workers);
 	return 0;
 }
 
@@ -366,9 +533,9 @@ static void json_sched(FILE *f, const struct sched_figures *x, double chord_um,
 		x->key, chord_um, x->profile, (unsigned long long)x->ref.blocks,
 		(unsigned long long)x->ref.segments, (unsigned long long)x->ref.setpoints,
 		workers, reps);
-	for (int i = 0; i < 5; i++)
-		fprintf(f, "    \"%s\": {\"workers\": %u, \"wall_s\": %.6f, \"cpu_s\": %.6f, \"job_ms\": [%.2f, %.2f], \"sched_ms\": [%.2f, %.2f], \"sleep_ms\": [%.2f, %.2f]},\n",
-			cf[i].name, cf[i].w, cf[i].best.wall, cf[i].best.cpu,
+	for (int i = 0; i < N_CFG; i++)
+		fprintf(f, "    \"%s\": {\"workers\": %u, \"lanes\": %u, \"wall_s\": %.6f, \"cpu_s\": %.6f, \"job_ms\": [%.2f, %.2f], \"sched_ms\": [%.2f, %.2f], \"sleep_ms\": [%.2f, %.2f]},\n",
+			cf[i].name, cf[i].w, cf[i].lanes, cf[i].best.wall, cf[i].best.cpu,
 			cf[i].best.job_ns[0] * 1e-6, cf[i].best.job_ns[1] * 1e-6,
 			cf[i].best.sched_ns[0] * 1e-6, cf[i].best.sched_ns[1] * 1e-6,
 			cf[i].best.sleep_ns[0] * 1e-6, cf[i].best.sleep_ns[1] * 1e-6);
@@ -381,6 +548,19 @@ static void json_sched(FILE *f, const struct sched_figures *x, double chord_um,
 	fprintf(f, "    \"speedup_hybrid_n_over_1\": %.4f,\n", x->sp_h);
 	fprintf(f, "    \"speedup_hybrid_rule2_as_written_n_over_1\": %.4f,\n", x->sp_r2);
 	fprintf(f, "    \"speedup_hybrid_over_fifo_n\": %.4f,\n", x->sp_f);
+	fprintf(f, "    \"speedup_hybrid_n_over_1_one_lane\": %.4f,\n", x->sp_1lane);
+	fprintf(f, "    \"task_cpu_ms_1_worker\": {");
+	for (unsigned t = 0; t < h1->n_tasks; t++)
+		fprintf(f, "%s\"%s\": %.3f", t ? ", " : "", h1->names[t], x->cost_ms[t]);
+	fprintf(f, "},\n");
+	const char *mk[3] = { "model_bound", "model_adjusted", "model_one_interp_task" };
+	const double *mv[3] = { x->model, x->model_adj, x->model_one };
+	for (int k = 0; k < 3; k++) {
+		fprintf(f, "    \"%s_speedup_1_to_8\": [", mk[k]);
+		for (unsigned n = 1; n <= 8; n++)
+			fprintf(f, "%s%.4f", n > 1 ? ", " : "", mv[k][n]);
+		fprintf(f, "],\n");
+	}
 	fprintf(f, "    \"speedup_bound_largest_task\": %.4f,\n", x->bound);
 	fprintf(f, "    \"calibration_independent_threads_speedup\": %.4f\n  }%s\n",
 		x->calib, last ? "" : ",");
@@ -486,6 +666,7 @@ int main(int argc, char **argv)
 		if (sched_experiment(&h, heavy, workers, reps, x))
 			return 1;
 	}
+	model_source_print();
 	long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
 	double load[1] = { -1 };
 	FILE *lf = fopen("/proc/loadavg", "r");
@@ -535,9 +716,17 @@ int main(int argc, char **argv)
 				"\"unit\": \"x\", \"better\": \"higher\"},\n", workers, kind, fig[i].sp_f);
 			fprintf(f, "    {\"name\": \"calibration_%uthreads_%s\", \"value\": %.4f, "
 				"\"unit\": \"x\", \"better\": \"higher\", \"note\": \"independent threads "
-				"over 1: what the machine offered\"}%s\n", workers, kind, fig[i].calib,
-				i + 1 == nfig ? "" : ",");
+				"over 1: what the machine offered\"},\n", workers, kind, fig[i].calib);
+			fprintf(f, "    {\"name\": \"model_speedup_4w_%s\", \"value\": %.4f, "
+				"\"unit\": \"x\", \"better\": \"higher\", \"note\": \"N-worker model from "
+				"the measured 1-worker task costs, lanes = workers (adjusted: %.2f; one "
+				"interp task: %.2f)\"},\n", kind, fig[i].model[4], fig[i].model_adj[4],
+				fig[i].model_one[4]);
 		}
+		fprintf(f, "    {\"name\": \"model_source_workload_4w\", \"value\": %.4f, "
+			"\"unit\": \"x\", \"better\": \"higher\", \"note\": \"the model (hybrid rules, event "
+			"simulation) on seed 003's workload: 6 equal tasks, 150 items; 3.895 measured there\"}\n",
+			source_speedup[4]);
 		fprintf(f, "  ]\n}\n");
 		fclose(f);
 	}
