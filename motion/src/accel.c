@@ -95,7 +95,9 @@ static bool deal(struct accel *a, bool at_end)
 	if (a->fill >= a->chunk)
 		pc->flags |= PIECE_CHUNK_END;
 	ring_commit(r);
-	atomic_fetch_add_explicit(&a->issued[a->lane], n, memory_order_release);
+	/* accel is the only writer: a plain store, no locked add */
+	uint64_t is = atomic_load_explicit(&a->issued[a->lane], memory_order_relaxed);
+	atomic_store_explicit(&a->issued[a->lane], is + n, memory_order_release);
 	if (a->fill >= a->chunk) {
 		a->fill = 0;
 		a->lane = a->lane + 1 < a->lanes ? a->lane + 1 : 0;
