@@ -121,6 +121,24 @@ def run_kernel(board: qemu.Board, kernel: str, seconds: float, loads: list[str])
     return out
 
 
+def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
+    """The summary table's figures (bench/README.md, bench/figures.schema.json)."""
+    out: list[dict[str, Any]] = []
+    for kernel, k in result["kernels"].items():
+        for name, w in k["windows"].items():
+            lat = w["wake_latency_ns_since_start"]
+            out += [
+                {"name": f"{kernel}_{name}_missed", "value": w["missed"], "unit": "cycles", "better": "lower",
+                 "note": f"of {w['cycles'] + w['missed']} in {w['guest_seconds']} s guest time"},
+                {"name": f"{kernel}_{name}_wake_latency_max", "value": round(lat["max"] / 1000, 2), "unit": "us",
+                 "better": "lower", "note": f"since servod's start; largest bucket of the window: "
+                                            f"{w['largest_bucket_reached']}"},
+                {"name": f"{kernel}_{name}_wake_latency_mean", "value": round(lat["mean"] / 1000, 2),
+                 "unit": "us", "better": "lower", "note": "since servod's start"},
+            ]
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=5.0, help="guest seconds per window (default: %(default)s)")
@@ -152,6 +170,7 @@ def main() -> int:
         for name, w in k["windows"].items():
             print(f"{kernel:8} {name:8} {w['cycles']:7} {w['missed']:6} {w['late']:5}  "
                   f"{str(w['largest_bucket_reached']):15} {w['wake_latency_ns_since_start']['max'] / 1000:20.1f}")
+    result["figures"] = figures(result)
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(result, indent=2) + "\n")
     print(f"written {args.json}")
