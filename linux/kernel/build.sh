@@ -178,6 +178,7 @@ rt_series() {
 }
 
 if [ "$variant" = rt ]; then
+	command -v patch >/dev/null || die "patch missing (build-essential brings it): run scripts/bootstrap.sh"
 	rt_series
 	key=$({
 		printf 'linux-source-6.1 %s\n' "$version"
