@@ -19,8 +19,8 @@ Per point, after every drive is in "operation enabled" (app_debug.
 force_enable through the gdbstub), a window of --cycles cycles:
   - from the firmware's `stats can=N` lines: SYNCs sent, SYNCs missed
     (TX FIFO full), PDOs missing;
-  - from a passive canlink client on the bus (guest time, every frame the
-    guest sent and every answer): bits per cycle = the sum of
+  - from a canlink client on the bus (guest time, every frame the guest
+    sent and every answer; it only sends DONEs, see tap()): bits per cycle = the sum of
     servoamp.canlink.frame_bits() of the frames between two SYNCs; load =
     bits x bit time / period. Compared with the firmware's compile-time
     estimate (BOARD_CANn_LOAD_PERMILLE) and the analytic figure (SYNC +
@@ -40,7 +40,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -149,33 +148,59 @@ def build(period_us: int, drives: dict[int, int], root: Path, jobs: int) -> Buil
 
 # ---- one run ----------------------------------------------------------------
 
-class Tap(threading.Thread):
-    """A passive canlink client: every frame on one bus, (t_ns end, can_id,
-    bits). Reads all the time (QEMU drops a client whose socket fills)."""
+def tap(path: Path, out: Path) -> int:
+    """The bench's canlink client, in a process of its own (--tap): every
+    record QEMU sends, raw, into ``out`` until BYE.
 
-    def __init__(self, path: Path) -> None:
-        super().__init__(daemon=True)
-        self.path = path
-        self.frames: list[tuple[int, int, int]] = []
-        self.error = ""
-        self.link: canlink.Link | None = None
-
-    def run(self) -> None:
+    It says ACTIVE and answers every guest frame with a bare DONE: QEMU
+    then waits for it (guest time stands still meanwhile, so the figures do
+    not change) instead of dropping it when its socket fills, as it drops a
+    passive client that falls behind (seen on the shared host, with the
+    client as a thread of the bench and as a process of its own). It sends
+    no frame: the bus is the same (the figures equal a passive run's)."""
+    deadline = time.monotonic() + 120
+    while not path.exists():
+        if time.monotonic() > deadline:
+            print(f"tap: {path} never appeared", file=sys.stderr)
+            return 1
+        time.sleep(0.02)
+    link = canlink.Link.connect(str(path), active=True, name="bench", timeout=60)
+    with open(out, "wb", buffering=1 << 16) as f:
         try:
-            deadline = time.monotonic() + 60
-            while not self.path.exists():
-                if time.monotonic() > deadline:
-                    raise TimeoutError(f"{self.path} never appeared")
-                time.sleep(0.05)
-            self.link = canlink.Link.connect(str(self.path), active=False, name="bench", timeout=60)
             while True:
-                rec = self.link.recv(None)
+                rec = link.recv(None)
                 if rec is None or rec.type == canlink.BYE:
-                    return
-                bits = canlink.frame_bits(rec.can_id, rec.eff, rec.rtr, rec.dlc, b"" if rec.rtr else rec.data)
-                self.frames.append((rec.t_ns, rec.can_id, bits))
-        except (canlink.ProtocolError, OSError, TimeoutError) as e:
-            self.error = str(e)
+                    return 0
+                f.write(canlink.pack(rec))
+                if not rec.info:
+                    link.done(rec.seq)
+        except (canlink.ProtocolError, OSError) as e:
+            print(f"tap: {e}", file=sys.stderr)
+            return 0 if link.closed else 1
+
+
+def tap_frames(raw: Path) -> list[tuple[int, int, int]]:
+    """(end time ns, COB-ID, bits) of every frame a tap saved."""
+    data = raw.read_bytes() if raw.exists() else b""
+    out = []
+    for k in range(0, len(data) - len(data) % canlink.RECORD_SIZE, canlink.RECORD_SIZE):
+        rec = canlink.unpack(data[k:k + canlink.RECORD_SIZE])
+        if rec.type == canlink.FRAME:
+            out.append((rec.t_ns, rec.can_id, canlink.frame_bits(rec.can_id, rec.eff, rec.rtr, rec.dlc, rec.data)))
+    return out
+
+
+def wait_uart(q: Any, pattern: str, count: int = 1, timeout: float = 60.0) -> None:
+    """QemuRpu.wait_uart, rescanning UART1's text every 0.1 s instead of
+    every 0.02 s (less CPU taken from the lockstep run on a shared host)."""
+    rx = re.compile(pattern, re.M)
+    deadline = time.monotonic() + timeout
+    while len(rx.findall(q.uart_text())) < count:
+        if not q.machine.running:
+            raise RuntimeError(f"QEMU exited; UART1:\n{q.uart_text()[-3000:]}")
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{pattern!r} x{count} not on UART1 after {timeout} s:\n{q.uart_text()[-3000:]}")
+        time.sleep(0.1)
 
 
 def can_stats(text: str, bus: int) -> list[dict[str, int]]:
@@ -222,7 +247,7 @@ def run_boot(b: Build, cycles: int, workdir: Path, log: Any) -> dict[int, dict[s
 
     sockdir = Path(tempfile.mkdtemp(prefix="canbench-"))
     sims: list[subprocess.Popen[bytes]] = []
-    taps: dict[int, Tap] = {}
+    taps: dict[int, subprocess.Popen[bytes]] = {}
     out: dict[int, dict[str, Any]] = {}
     try:
         links: dict[int, Path] = {}
@@ -232,26 +257,26 @@ def run_boot(b: Build, cycles: int, workdir: Path, log: Any) -> dict[int, dict[s
             sims.append(subprocess.Popen([sys.executable, "-m", "servoamp.drivesim", "--socket", str(links[bus]),
                                           "--nodes", f"1-{n}", "--wait", "120", "-v"], stdout=slog,
                                          stderr=subprocess.STDOUT, cwd=REPO))
-            taps[bus] = Tap(links[bus])
-            taps[bus].start()
+            taps[bus] = subprocess.Popen([sys.executable, __file__, "--tap", str(links[bus]), "--json",
+                                          str(workdir / f"can{bus}.rec")], stderr=open(workdir / f"tap{bus}.log", "w"))
         elf = b.dir / "servo.elf"
         t_host = time.monotonic()
         with QemuRpu(workdir / "q", b.dir / "qemu-stub.elf", elf, can_links=links,
                      can_link_opts={"timeout-ms": 2000}) as q:
-            q.wait_uart(r"^running:", timeout=60)
+            wait_uart(q, r"^running:", timeout=60)
             g = q.attach_gdb()
             g.interrupt()
             g.select_cpu(0)
             g.write32(_symbol(elf, "app_debug"), b.mask)
             g.cont()
             n_axes = sum(b.drives.values())
-            q.wait_uart(r"^axis\d+: can\d node \d+: operation enabled, error 0000", count=n_axes, timeout=300)
+            wait_uart(q, r"^axis\d+: can\d node \d+: operation enabled, error 0000", count=n_axes, timeout=300)
             last_bus = max(b.drives)
             last = rf"^stats canps={last_bus} "
             n0 = len(re.findall(last, q.uart_text(), re.M))
             intervals = max(1, round(cycles / STATS_CYCLES))
             # one full interval to settle, then the window
-            q.wait_uart(last, count=n0 + 1 + intervals, timeout=60 + cycles * b.period_us / 1e6 * 60)
+            wait_uart(q, last, count=n0 + 1 + intervals, timeout=60 + cycles * b.period_us / 1e6 * 60)
             text = q.uart_text()
             host_s = time.monotonic() - t_host
         log.write(text)
@@ -263,15 +288,22 @@ def run_boot(b: Build, cycles: int, workdir: Path, log: Any) -> dict[int, dict[s
             a, z = st[n0], st[n0 + intervals]
             d = {k: z[k] - a[k] for k in ("sync", "sync_missed", "rpdo", "rpdo_missed", "tpdo", "pdo_missing",
                                          "emcy", "hb_timeouts", "faults", "rx_bad")}
-            taps[bus].join(timeout=5)
-            load = bus_load(taps[bus].frames, t0_ns, t1_ns, b.period_us)
+            try:
+                taps[bus].wait(timeout=30)  # QEMU has quit: BYE
+            except subprocess.TimeoutExpired:
+                taps[bus].kill()
+            frames = tap_frames(workdir / f"can{bus}.rec")
+            tap_err = (workdir / f"tap{bus}.log").read_text().strip()
+            load = bus_load(frames, t0_ns, t1_ns, b.period_us)
+            with open(workdir / f"can{bus}-frames.txt", "w") as ff:  # the window: end time ns, id, bits
+                ff.writelines(f"{t} {cid:03x} {bits}\n" for t, cid, bits in frames if t0_ns <= t <= t1_ns)
             nominal, worst = analytic_bits(n)
             out[bus] = {
                 "drives": n, "period_us": b.period_us, "rate_hz": round(1e6 / b.period_us),
                 "window": {"cycles": c1[0] - c0[0], "guest_us": c1[1] - c0[1], "servo_missed": c1[2] - c0[2],
                            "host_s_whole_boot": round(host_s, 1)},
                 "stats": d, "nodes_op": z["nodes_op"],
-                "bus": load, "tap_error": taps[bus].error,
+                "bus": load, "tap_error": tap_err,
                 "analytic_bits": {"nominal_unstuffed": nominal, "worst_case": worst},
                 "analytic_load_pct": {"nominal_unstuffed": round(100 * nominal / b.period_us, 2),
                                       "worst_case": round(100 * worst / b.period_us, 2)},
@@ -279,7 +311,7 @@ def run_boot(b: Build, cycles: int, workdir: Path, log: Any) -> dict[int, dict[s
                 "pass": d["sync_missed"] == 0 and z["nodes_op"] == n and d["sync"] > 0,
             }
     finally:
-        for s in sims:
+        for s in sims + list(taps.values()):
             s.terminate()
             try:
                 s.wait(timeout=10)
@@ -331,6 +363,16 @@ def figures(points: list[dict[str, Any]], rates: list[int]) -> list[dict[str, An
                       "note": f"{bus['bits_mean']:.0f} bits/cycle mean, max {bus['bits_max']} ({bus['load_max_pct']} %); "
                               f"firmware estimate {p['firmware_load_permille'] / 10:.1f} %, analytic "
                               f"{p['analytic_load_pct']['nominal_unstuffed']} % unstuffed"})
+            f.append({"name": f"load_max_pct_{tag}", "value": bus["load_max_pct"], "unit": "%", "better": "lower",
+                      "note": f"the busiest cycle of {bus['cycles']}: {bus['bits_max']} bits (the drives' heartbeats "
+                              "in one cycle)"})
+        if "sync_gap_ns" in bus:
+            g = bus["sync_gap_ns"]
+            per = p["period_us"] * 1000
+            f.append({"name": f"sync_jitter_us_{tag}", "unit": "us", "better": "lower",
+                      "value": round(max(per - g["min"], g["max"] - per) / 1000, 1),
+                      "note": f"SYNC to SYNC on the bus {g['min'] / 1000:.1f}..{g['max'] / 1000:.1f} us "
+                              "(the end of the SYNC frame, guest time)"})
         f.append({"name": f"sync_missed_{tag}", "value": p["stats"]["sync_missed"], "unit": "cycles",
                   "better": "lower", "note": f"of {p['stats']['sync']} SYNCs; pdo_missing {p['stats']['pdo_missing']}"})
     for r in rates:
@@ -356,7 +398,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path)
     ap.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench" / "fieldbus")
     ap.add_argument("-j", "--jobs", type=int, default=2)
+    ap.add_argument("--tap", type=Path, help=argparse.SUPPRESS)  # internal: the bus client (--json: its file)
     args = ap.parse_args(argv)
+    if args.tap:
+        return tap(args.tap, args.json)
     if args.quick:
         args.rates, args.drives, args.cycles = "1000", "1-2", 1000
     os.environ.setdefault("PYTHONPATH", str(REPO / "python"))
