@@ -22,39 +22,4 @@ if [ "$(.venv/bin/python -m servoamp.bench --scope "$@")" = all ]; then
 	scripts/bootstrap.sh >&2
 fi
 
-# fieldbus (issue 22, bench/fieldbus/can_bench.py, boots QEMU with the drive
-# simulator): run here when named or when all run, before the others;
-# servoamp.bench then shows its bench/results/fieldbus.json in the table
-# like any results file (python/servoamp/bench.py has no entry for it yet).
-fb=0 names=0 quick=0 info=0 verbose=0 results="" prev=""
-for a in "$@"; do
-	if [ "$prev" = --results ]; then results=$a prev=""; continue; fi
-	case $a in
-	--list|--table|--scope|-h|--help) info=1 ;;
-	--quick) quick=1 ;;
-	-v|--verbose) verbose=1 ;;
-	--results) prev=--results ;;
-	--results=*) results=${a#--results=} ;;
-	-*) ;;
-	fieldbus) fb=1 names=1 ;;
-	*) names=1 ;;
-	esac
-done
-[ "$names" = 1 ] || fb=1
-rc=0
-if [ "$info" = 0 ] && [ "$fb" = 1 ]; then
-	scripts/bootstrap.sh >&2
-	if [ "$quick" = 1 ]; then dir=${results:-build/bench/quick} qa=(--quick) log=build/bench/fieldbus-quick.log
-	else dir=${results:-bench/results} qa=() log=build/bench/fieldbus.log; fi
-	mkdir -p "$dir" build/bench
-	echo "[bench] fieldbus: running (about 3 min, 4 QEMU boots)"
-	t0=$SECONDS
-	cmd=(.venv/bin/python bench/fieldbus/can_bench.py "${qa[@]}" --json "$dir/fieldbus.json")
-	echo "\$ ${cmd[*]}" > "$log"
-	if [ "$verbose" = 1 ]; then "${cmd[@]}" 2>&1 | tee -a "$log"; frc=${PIPESTATUS[0]}
-	else "${cmd[@]}" >> "$log" 2>&1 && frc=0 || frc=$?; fi
-	if [ "$frc" = 0 ]; then echo "[bench] fieldbus: $((SECONDS - t0)) s, wrote $dir/fieldbus.json"
-	else echo "[bench] fieldbus: failed (exit $frc) after $((SECONDS - t0)) s: see $log"; rc=1; fi
-fi
-.venv/bin/python -m servoamp.bench "$@" || rc=1
-exit $rc
+exec .venv/bin/python -m servoamp.bench "$@"

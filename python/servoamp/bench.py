@@ -84,6 +84,12 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           (),
           ("{python}", "bench/cycle/determinism_bench.py", "--json", "{json}"),
           ("--cycles", "300", "--runs", "quiet")),
+    Bench("fieldbus", "CiA 402 drives on CAN (firmware in QEMU, drive simulators in lockstep): "
+          "bus load per cycle, highest drives x rate per bus with 0 SYNC missed",
+          True, "about 3 min (4 QEMU boots; the first run builds the firmware variants)",
+          (),
+          ("{python}", "bench/fieldbus/can_bench.py", "--json", "{json}"),
+          ("--quick",)),
     Bench("recorder", "recording encodings, JSON (servoamp record) vs protobuf (servoamp bridge, foxglove-sdk): "
           "bytes/cycle, CPU per 1000 cycles, max rate x axes at 4 and 8 axes",
           False, "about 2-3 min (one rate ramp per encoding and axis count)",
