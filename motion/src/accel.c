@@ -2,6 +2,8 @@
 /* The accel stage (see accel.h). */
 #include "accel.h"
 
+#include <string.h>
+
 #include "items.h"
 #include "pipeline.h"
 #include "plan.h"
@@ -15,6 +17,7 @@ void accel_init(struct accel *a, struct motion *m,
 	a->ip = ip;
 	a->segs = segs;
 	a->batch = cfg->batch;
+	a->na = cfg->n_axes;
 	a->lanes = cfg->interp_lanes;
 	a->chunk = cfg->interp_chunk ? cfg->interp_chunk : cfg->batch;
 	a->T = cfg->period_us * 1e-6;
@@ -72,8 +75,7 @@ static bool deal(struct accel *a, bool at_end)
 
 	if (!pc)
 		return false;
-	pc->seg = a->seg;
-	pc->kind = a->kind;
+	memcpy(piece_seg(pc), seg_at(a->segs, a->seg), seg_size(a->na));
 	pc->v0 = a->v0;
 	pc->vp = a->vp;
 	pc->v1 = a->v1;

@@ -25,7 +25,7 @@ struct accel {
 	struct ring *in;          /* struct planned */
 	struct interp *ip;        /* the lanes (their input rings) */
 	const struct ring *segs;  /* the segments the items refer to */
-	uint32_t batch, lanes, chunk;
+	uint32_t batch, lanes, chunk, na;
 	double T;
 	bool jerk;
 	/* state: the current segment and the time into it */

@@ -26,7 +26,7 @@ int interp_init(struct interp *ip, struct motion *m,
 		l->ip = ip;
 		l->id = k;
 		l->issued = &issued[k];
-		if (ring_init(&l->in, sizeof(struct piece), lane_in) ||
+		if (ring_init(&l->in, piece_size(cfg->n_axes), lane_in) ||
 		    ring_init(&l->out, sp_size(cfg->n_axes), lane_out))
 			return -1;
 	}
@@ -92,7 +92,7 @@ uint32_t interp_run(void *arg, unsigned worker)
 		if (!pc)
 			break;
 		if (!l->have) {
-			l->g = seg_at(ip->segs, pc->seg);
+			l->g = piece_seg((void *)pc);
 			plan_profile(&l->prof, l->g, pc->v0, pc->vp, pc->v1, ip->jerk);
 			l->tau = pc->tau0;
 			l->i = 0;

@@ -56,7 +56,7 @@ struct interp_lane {
 struct interp {
 	/* wiring, read-only after interp_init() */
 	struct motion *m;         /* for pipeline_notify_end() */
-	const struct ring *segs;  /* the segments the items refer to */
+	const struct ring *segs;  /* the segment ring (pieces carry copies) */
 	uint32_t na, batch, lanes;
 	double T;                 /* period, s */
 	double ipm;               /* increments per mm */

@@ -243,13 +243,12 @@ static int make_rings(struct motion *m, const struct motion_config *cfg)
 	return ring_init(&m->q[Q_BLOCKS], sizeof(struct gc_block), cfg->q_blocks) ||
 	       /* segments are referred to by their slot until interpolation
 		* is done with them: a slot is reused only after the segment
-		* ring, the look-ahead window, the planned queue, accel's
-		* current segment and every lane's pieces (one piece per
-		* segment at least) have all moved past it */
+		* ring, the look-ahead window, the planned queue and accel's
+		* current segment have all moved past it (the pieces dealt to
+		* the interpolation lanes carry a copy of their segment) */
 	       ring_init_slots(&m->q[Q_SEGS], seg_size(cfg->n_axes),
 			       cfg->q_segments,
 			       cfg->q_segments + cfg->lookahead + cfg->q_planned +
-				       cfg->interp_lanes * (cfg->q_profiles + 1u) +
 				       4u) ||
 	       ring_init(&m->q[Q_PLANNED], sizeof(struct planned), cfg->q_planned);
 }
