@@ -127,7 +127,8 @@ def test_can_board_four_drives_two_per_bus(tmp_path):
     assert cfg["BOARD_CAN_PRIORITY"] < cfg["BOARD_CYCLE_PRIORITY"]
     assert cfg["BOARD_CAN_HEARTBEAT_CONSUMER_MS"] > cfg["BOARD_CAN_HEARTBEAT_PRODUCER_MS"]
     # SYNC + 2 x (RPDO + TPDO), worst-case stuffing, at 1 Mbit/s and 1 kHz
-    assert cfg["BOARD_CAN0_LOAD_PERMILLE"] == cfg["BOARD_CAN1_LOAD_PERMILLE"] == 515
+    # SYNC 55 + 2 x (RPDO 115 + TPDO 115 + heartbeat 65) worst-case bits of 1000
+    assert cfg["BOARD_CAN0_LOAD_PERMILLE"] == cfg["BOARD_CAN1_LOAD_PERMILLE"] == 645
     for k, v in CONTRACT.items():
         assert cfg[k] == v, k
     mmu = re.findall(r"X\((0x[0-9a-f]+)u, (0x[0-9a-f]+)u, (MMU_\w+)\)", hdr)
