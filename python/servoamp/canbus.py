@@ -43,7 +43,7 @@ class ServoampBus(can.BusABC):
                  name: str = "pycan", connect_timeout: float = 10.0, **kwargs: Any) -> None:
         if not isinstance(channel, str) or not channel:
             raise can.CanInitializationError("servoamp: channel must be the canlink socket path")
-        if isinstance(active, str):       # from a command line: --active=true
+        if isinstance(active, str):       # from a command line: --bus-kwargs active=true
             active = active.strip().lower() in ("1", "true", "yes", "on")
         try:
             self._link = canlink.Link.connect(channel, active=bool(active), name=name,

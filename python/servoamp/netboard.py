@@ -84,7 +84,7 @@ class ControllerBoard:
                  host_port: int | None = None, accel: str | None = "tcg,thread=single",
                  keep_logs: bool = False, extra_args: Sequence[str] = (),
                  clock: str | None = None, icount: str | None = None,
-                 can_drives: Mapping[int, str] | None = None, can_log: bool = False,
+                 can_drives: Mapping[int, str] | None = None, can_log: Path | None = None,
                  can_link_opts: Mapping[str, int] | None = None,
                  drivesim_args: Sequence[str] = ()) -> None:
         self.board = board or qemu.Board.load("zynq7000_qemu")
@@ -101,11 +101,16 @@ class ControllerBoard:
         self.token = secrets.token_hex(16)  # servod's --telemetry-token, per boot
         # CAN (docs/canlink.md, docs/fieldbus.md): bus (0: CAN0, 1: CAN1) ->
         # the drive simulator's --nodes on it; each bus linked in lockstep to
-        # its own servoamp-drivesim, and with can_log a passive python-can
-        # logger per bus writing run_dir/canN.asc (every frame on the bus)
+        # its own servoamp-drivesim, and with can_log (a directory) a passive
+        # python-can logger per bus writing can_log/canN.asc (every frame on
+        # the bus, whole once QEMU has quit)
         self.can_drives = dict(can_drives or {})
         self.can_log = can_log
-        self.can_link_opts = dict(can_link_opts or {})
+        # a simulator or logger held up on a loaded host must not cost the
+        # guest an answer (canlink drops what comes after timeout-ms): 10 s
+        # here, against the backend's 200 ms; a dead one closes its socket
+        # and is dropped at once
+        self.can_link_opts = {"timeout-ms": 10_000} | dict(can_link_opts or {})
         self.drivesim_args = list(drivesim_args)
         self.can_socks: dict[int, Path] = {}
         self.can_procs: list[tuple[str, subprocess.Popen[bytes], IO[bytes]]] = []
@@ -133,11 +138,14 @@ class ControllerBoard:
                                                 str(self.can_socks[b]), "--nodes", nodes, "--wait", "60",
                                                 "--control", str(self._drive_ctl(b)), "-v",
                                                 *self.drivesim_args])
-                if self.can_log:
-                    assert self.machine.run_dir is not None
+                if self.can_log is not None:
+                    self.can_log.mkdir(parents=True, exist_ok=True)
+                    # active: QEMU waits for it as for the drives, so a
+                    # logger that falls behind holds the guest instead of
+                    # filling its socket and being dropped (every frame logged)
                     self._can_proc(f"canlog{b}", [sys.executable, "-m", "can.logger", "-i", "servoamp",
                                                   "-c", str(self.can_socks[b]), "-f",
-                                                  str(self.machine.run_dir / f"can{b}.asc")])
+                                                  str(self.can_log_path(b)), "--bus-kwargs", "active=true"])
             self.boot_times = qemu.boot_to_shell(self.machine, timeout=timeout)
             bring_up(self.machine.uart(0), self.prompt, GUEST_ADDR, timeout=20)
         except BaseException:
@@ -176,9 +184,9 @@ class ControllerBoard:
         return ans
 
     def can_log_path(self, bus: int) -> Path:
-        """The passive logger's ASC file of a bus (can_log=True)."""
-        assert self.machine is not None and self.machine.run_dir is not None
-        return self.machine.run_dir / f"can{bus}.asc"
+        """The passive logger's ASC file of a bus (can_log: its directory)."""
+        assert self.can_log is not None
+        return self.can_log / f"can{bus}.asc"
 
     def stop(self) -> None:
         if self.machine is not None:
