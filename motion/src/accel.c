@@ -51,16 +51,14 @@ void accel_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
  * duration of its profile. */
 static void take(struct accel *a, const struct planned *in)
 {
-	struct profile p;
 	const struct seg *g = seg_at(a->segs, in->seg);
+	double vp = in->kind == SEG_MOVE ? plan_peak(g, in->v0, in->v1, a->jerk) : 0.0;
 
 	a->seg = in->seg;
 	a->kind = in->kind;
-	a->v0 = in->v0;
 	a->v1 = in->v1;
-	a->vp = in->kind == SEG_MOVE ? plan_peak(g, in->v0, in->v1, a->jerk) : 0.0;
-	plan_profile(&p, g, a->v0, a->vp, a->v1, a->jerk);
-	a->dur = p.dur;
+	plan_profile(&a->prof, g, in->v0, vp, in->v1, a->jerk);
+	a->dur = a->prof.dur;
 	a->cur_valid = true;
 }
 
@@ -76,9 +74,7 @@ static bool deal(struct accel *a, bool at_end)
 	if (!pc)
 		return false;
 	memcpy(piece_seg(pc), seg_at(a->segs, a->seg), seg_size(a->na));
-	pc->v0 = a->v0;
-	pc->vp = a->vp;
-	pc->v1 = a->v1;
+	pc->prof = a->prof;
 	pc->tau0 = a->tau;
 	if (at_end) {
 		n = 1;

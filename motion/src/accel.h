@@ -32,7 +32,8 @@ struct accel {
 	uint32_t seg;
 	uint8_t kind;
 	bool cur_valid;
-	double v0, vp, v1, dur, tau;
+	double v1, dur, tau;
+	struct profile prof;      /* the current segment's */
 	uint32_t lane, fill;      /* current lane, samples in its chunk */
 	_Atomic uint64_t n_profiles;
 	/* samples dealt to each lane (read by interp_levels()) */

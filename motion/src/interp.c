@@ -93,7 +93,6 @@ uint32_t interp_run(void *arg, unsigned worker)
 			break;
 		if (!l->have) {
 			l->g = piece_seg((void *)pc);
-			plan_profile(&l->prof, l->g, pc->v0, pc->vp, pc->v1, ip->jerk);
 			l->tau = pc->tau0;
 			l->i = 0;
 			l->have = true;
@@ -104,7 +103,7 @@ uint32_t interp_run(void *arg, unsigned worker)
 			int32_t *sp = ring_slot(&l->out);
 			if (!sp)
 				goto out;
-			interp_sample(ip, sp, &l->prof, l->g, l->tau, false);
+			interp_sample(ip, sp, &pc->prof, l->g, l->tau, false);
 			l->i++;
 			if (chunk_end && !at_end && l->i == pc->n)
 				sp[1] = SP_CHUNK_END;
@@ -120,7 +119,7 @@ uint32_t interp_run(void *arg, unsigned worker)
 			int32_t *sp = ring_slot(&l->out);
 			if (!sp)
 				break;
-			interp_sample(ip, sp, &l->prof, l->g, l->tau, true);
+			interp_sample(ip, sp, &pc->prof, l->g, l->tau, true);
 			if (chunk_end)
 				sp[1] = SP_CHUNK_END;
 			ring_commit(&l->out);

@@ -29,9 +29,44 @@
 
 #include "motion/motion.h"
 #include "motion/ring.h"
+#include "items.h"
 #include "plan.h"
 
 #define INTERP_MAX_LANES MOTION_MAX_WORKERS
+
+/* Interpolation input (accel -> one interpolation lane, see interp.h):
+ * the part of one segment that falls into one chunk of setpoints.  The
+ * lane samples the profile that accel expanded: n samples at
+ * tau0, tau0 + T, ... (each by adding T to the previous one, as the
+ * serial interpolator did), then, with PIECE_AT_END, one sample exactly at
+ * the end point.  PIECE_CHUNK_END: its last sample ends the chunk.
+ *
+ * The piece carries a copy of its segment (piece_seg(), seg_size() bytes
+ * after the header) rather than its slot: lanes work behind one another
+ * by up to a whole output ring of setpoints, and a segment that yields no
+ * sample (shorter than the time left over) yields no piece, so the lanes
+ * cannot bound how long a segment slot would have to stay valid.  Accel
+ * is the segment's last reader, as the serial interpolator was. */
+enum { PIECE_AT_END = 1, PIECE_CHUNK_END = 2 };
+
+struct piece {
+	uint32_t n;
+	uint8_t flags;
+	double tau0;
+	struct profile prof; /* expanded once, by accel */
+	/* then struct seg, seg_size(n_axes) bytes */
+};
+
+static inline size_t piece_size(uint32_t n_axes)
+{
+	return sizeof(struct piece) + seg_size(n_axes);
+}
+
+static inline struct seg *piece_seg(void *pc)
+{
+	return (struct seg *)((unsigned char *)pc + sizeof(struct piece));
+}
+
 
 struct interp;
 
@@ -45,8 +80,7 @@ struct interp_lane {
 	const _Atomic uint64_t *issued; /* samples dealt to this lane (accel) */
 	unsigned id;
 	/* state: the piece at the front of in, as far as it is done */
-	_Alignas(RING_CACHELINE) struct profile prof;
-	const struct seg *g;
+	_Alignas(RING_CACHELINE) const struct seg *g;
 	double tau;
 	uint32_t i;            /* samples of the piece done */
 	bool have;             /* prof, g, tau, i are the front piece's */

@@ -66,39 +66,6 @@ struct planned {
 	double v0, v1;
 };
 
-/* Interpolation input (accel -> one interpolation lane, see interp.h):
- * the part of one segment that falls into one chunk of setpoints.  The
- * lane expands the profile from the three speeds and takes n samples at
- * tau0, tau0 + T, ... (each by adding T to the previous one, as the
- * serial interpolator did), then, with PIECE_AT_END, one sample exactly at
- * the end point.  PIECE_CHUNK_END: its last sample ends the chunk.
- *
- * The piece carries a copy of its segment (piece_seg(), seg_size() bytes
- * after the header) rather than its slot: lanes work behind one another
- * by up to a whole output ring of setpoints, and a segment that yields no
- * sample (shorter than the time left over) yields no piece, so the lanes
- * cannot bound how long a segment slot would have to stay valid.  Accel
- * is the segment's last reader, as the serial interpolator was. */
-enum { PIECE_AT_END = 1, PIECE_CHUNK_END = 2 };
-
-struct piece {
-	uint32_t n;
-	uint8_t flags;
-	double tau0;
-	double v0, vp, v1;
-	/* then struct seg, seg_size(n_axes) bytes */
-};
-
-static inline size_t piece_size(uint32_t n_axes)
-{
-	return sizeof(struct piece) + seg_size(n_axes);
-}
-
-static inline struct seg *piece_seg(void *pc)
-{
-	return (struct seg *)((unsigned char *)pc + sizeof(struct piece));
-}
-
 /* Setpoints travel through their ring compactly, sized by the number of
  * axes n: int32 line, flags (SP_CHUNK_END: the last of its chunk; the
  * consumer reads the next lane after it), pos[n], vel[n] (status MOVING,

@@ -253,6 +253,14 @@ static int make_rings(struct motion *m, const struct motion_config *cfg)
 	       ring_init(&m->q[Q_PLANNED], sizeof(struct planned), cfg->q_planned);
 }
 
+/* A lane's ring: its share of the queue's capacity (at least 4 items), so
+ * that the lanes together hold what the one interpolator's queue held. */
+static uint32_t lane_cap(uint32_t q, uint32_t lanes)
+{
+	uint32_t c = q / lanes;
+	return c < 4 ? 4 : c;
+}
+
 static const char *const lane_names[INTERP_MAX_LANES] = {
 	"interp0", "interp1", "interp2", "interp3",
 	"interp4", "interp5", "interp6", "interp7",
@@ -332,7 +340,8 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	if (stream_init(&m->src, cfg) || make_rings(m, cfg) ||
 	    lookahead_init(&m->la, m, cfg, &m->q[Q_SEGS], &m->q[Q_PLANNED]) ||
 	    interp_init(&m->ip, m, cfg, &m->q[Q_SEGS], m->acc.issued,
-			cfg->q_profiles, cfg->q_setpoints))
+			lane_cap(cfg->q_profiles, m->cfg.interp_lanes),
+			lane_cap(cfg->q_setpoints, m->cfg.interp_lanes)))
 		goto nomem;
 	decode_init(&m->dec, m, cfg, &m->src, &m->q[Q_BLOCKS]);
 	fit_init(&m->fit, cfg, &m->q[Q_BLOCKS], &m->q[Q_SEGS]);
