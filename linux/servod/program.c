@@ -203,7 +203,9 @@ void prog_cycle(struct prog_runner *pr, struct amp_cmd_axis *cmd, uint32_t n, ui
 	path_error_command(&p->pe, seq, p->line, cmd, n);
 }
 
-/* The servo cannot follow (why: 1 link lost, 2 safe stop, 3 servo fault): a running
+static int running(int m);
+
+/* The servo cannot follow (why: 1 link lost, 2 safe stop, 3 servo fault, 4 a drive's fault): a running
  * program ends in fault and the hold position is resynchronised from the
  * next fresh feedback. */
 static void lose_servo(struct prog_runner *pr, int m, int why)
@@ -241,6 +243,16 @@ void prog_feedback(struct prog_runner *pr, int rc, const struct amp_fb_record *f
 	if (nfb && (fb->axis[0].status_word & SP_AX_SAFESTOP)) {
 		lose_servo(pr, m, 2);
 		return;
+	}
+	/* a CAN drive in fault (or gone silent) ends a run like a servo fault */
+	for (uint32_t i = 0; i < nfb && running(m); i++) {
+		uint32_t sw = fb->axis[i].status_word, d = SP_AX_DRIVE(sw);
+
+		if (d == SP_DRIVE_FAULT || d == SP_DRIVE_FAULT_REACTION || d == SP_DRIVE_OFFLINE) {
+			atomic_store(&pr->drive_fault, (int)((i << 16) | SP_AX_ERROR(sw)));
+			lose_servo(pr, m, 4);
+			return;
+		}
 	}
 	if (p->resync && nfb == n) {	/* a hold position for every axis driven */
 		for (uint32_t i = 0; i < n; i++)
@@ -461,7 +473,7 @@ int prog_stop(struct prog_runner *pr, char *msg, size_t n)
 /* ---- status and figures ------------------------------------------------------------ */
 
 struct snap {
-	int mode, result, link_lost;
+	int mode, result, link_lost, drive_fault;
 	struct prog_playback play;
 };
 
@@ -472,6 +484,7 @@ static void snapshot(struct prog_runner *pr, struct snap *s)
 	s->mode = atomic_load(&pr->mode);
 	s->result = atomic_load(&pr->result);
 	s->link_lost = atomic_load(&pr->link_lost);
+	s->drive_fault = atomic_load(&pr->drive_fault);
 	pthread_mutex_unlock(pr->cycle_lock);
 }
 
@@ -497,6 +510,9 @@ void prog_format_status(struct prog_runner *pr, struct out *o, const int32_t *cm
 			put(o, "program.end_inc=%d,%d,%d\n", in->end_inc[0], in->end_inc[1], in->end_inc[2]);
 		if (in->error[0])
 			put(o, "program.error=%s\n", in->error);
+		else if (s.link_lost == 4)
+			put(o, "program.error=axis %d drive fault 0x%04x\n", s.drive_fault >> 16,
+			    s.drive_fault & 0xffff);
 		else if (s.link_lost)
 			put(o, "program.error=%s\n", s.link_lost == 1 ? "servo link lost" :
 			    s.link_lost == 3 ? "servo fault" : "servo in safe stop");

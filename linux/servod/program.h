@@ -95,7 +95,8 @@ struct prog_runner {
 	_Atomic int mode;		/* enum prog_mode */
 	_Atomic int result;		/* enum prog_result */
 	atomic_int req_hold, req_stop, feeder_done, feeder_abort;
-	atomic_int link_lost;		/* why a run ended: 1 link lost, 2 safe stop, 3 servo fault */
+	atomic_int link_lost;		/* why a run ended: 1 link lost, 2 safe stop, 3 servo fault, 4 drive fault */
+	atomic_int drive_fault;		/* link_lost 4: axis << 16 | the drive's error code */
 	struct prog_playback play;
 	struct ring queue;		/* struct motion_setpoint: feeder -> cycle thread */
 	_Alignas(RING_CACHELINE) unsigned char queue_buf[RING_BUF_BYTES(sizeof(struct motion_setpoint), PROG_QUEUE_N)];

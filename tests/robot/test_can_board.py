@@ -56,7 +56,17 @@ CAN_FIELDS = ("bus", "nodes_op", "sync", "sync_missed", "rpdo", "rpdo_missed", "
 
 
 def _kv(out: str) -> dict[str, str]:
-    return {k: v for k, _, v in (ln.partition("=") for ln in out.replace(" ", "\n").splitlines()) if _}
+    """ampctl's key=value lines; a line of several key=value words
+    ("axis0.drive=... axis0.error=...") gives each."""
+    kv: dict[str, str] = {}
+    for line in out.splitlines():
+        words = line.split()
+        parts = words if len(words) > 1 and all("=" in w for w in words) else [line]
+        for w in parts:
+            k, eq, v = w.partition("=")
+            if eq:
+                kv[k] = v
+    return kv
 
 
 def _status(cb: netboard.ControllerBoard) -> dict[str, str]:
@@ -64,6 +74,13 @@ def _status(cb: netboard.ControllerBoard) -> dict[str, str]:
 
 
 def _wait(cb: netboard.ControllerBoard, ok: Any, what: str, timeout: float) -> dict[str, str]:
+    """Poll ampctl status until ok(status), paced in guest time (a guest
+    sleep between polls): in lockstep the guest runs slower than the host
+    clock, and polling on the host clock ran ampctl several times per guest
+    second. One run in five skipped one servo command during the program;
+    the suspect (not proven) is that shell and exec work on the
+    non-preemptible kernel held servod's cycle thread off for a period,
+    as the recording test allows during remoteproc's recovery."""
     deadline = time.monotonic() + timeout
     while True:
         st = _status(cb)
@@ -71,7 +88,7 @@ def _wait(cb: netboard.ControllerBoard, ok: Any, what: str, timeout: float) -> d
             return st
         if time.monotonic() > deadline:
             raise AssertionError(f"{what}: not within {timeout:g} s: {st}")
-        time.sleep(0.5)
+        cb.sh("sleep 0.5", timeout=120)
 
 
 def can_stats(text: str) -> list[dict[str, int]]:
@@ -139,14 +156,18 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         for axis, (b, node, kind, code) in FAULTS.items():
             if kind == "following-error":
                 # the load jams; the drive trips once the axis is commanded
-                # to move and its following error passes 0x6065's window
+                # to move and its following error passes 0x6065's window:
+                # the running program ends in fault, naming the drive
                 cb.drives(b, f"fault {node} {kind}")
                 cb.sh_rc(f"ampctl run {PROGRAM} 2>&1", timeout=60)
+                out["fault_prog"] = _wait(cb, lambda st: st.get("program.state") != "running",
+                                          "the program to end on the drive's fault", 240)
+                out["faults"][axis] = out["fault_prog"]
             else:
                 cb.drives(b, f"fault {node} {kind}")
-            out["faults"][axis] = _wait(
-                cb, lambda st, a=axis, c=code: st.get(f"axis{a}.error") == f"0x{c:04x}",
-                f"axis{axis}: error 0x{code:04x} ({kind})", 240)
+                out["faults"][axis] = _wait(
+                    cb, lambda st, a=axis, c=code: st.get(f"axis{a}.error") == f"0x{c:04x}",
+                    f"axis{axis}: error 0x{code:04x} ({kind})", 240)
             cb.ampctl("stop", expected_rc=None)
         out["fault_st"] = _status(cb)
         out["servo_log"] = servo.output
@@ -242,8 +263,17 @@ def _bus_offset_us(run: dict[str, Any], b: int, frames: list[tuple[float, int, s
     return t0 - nmt * 1e6
 
 
+def test_a_drive_fault_stops_the_program(run: dict[str, Any]) -> None:
+    st = run["fault_prog"]
+    assert st["program.state"] == "fault", st
+    # program.error is a whole line: "axis 0 drive fault 0x8611"
+    assert "0x8611" in st["program.error"], st
+
+
 def test_drive_faults_reach_linux_with_their_codes(run: dict[str, Any]) -> None:
     for axis, (b, node, kind, code) in FAULTS.items():
+        if kind == "following-error":
+            continue        # the program's end names it (above); the firmware log below
         st = run["faults"][axis]
         assert st[f"axis{axis}.drive"] in ("fault", "offline"), (kind, st)
         assert st[f"axis{axis}.error"] == f"0x{code:04x}", (kind, st)
