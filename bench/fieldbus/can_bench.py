@@ -79,9 +79,12 @@ def bits_worst(dlc: int) -> int:
 
 
 def analytic_bits(n: int) -> tuple[int, int]:
-    """(nominal without stuffing, worst case) bits of one cycle with n drives:
-    SYNC + n x (RPDO1 + TPDO1), both 6 bytes."""
-    return bits_unstuffed(0) + 2 * n * bits_unstuffed(6), bits_worst(0) + 2 * n * bits_worst(6)
+    """(nominal, worst case) bits of one cycle with n drives: nominal is
+    SYNC + n x (RPDO1 + TPDO1, both 6 bytes) without stuffing; the worst
+    case, gen_board_header.py's check, adds each drive's heartbeat (1 byte:
+    all may fall in one cycle) and every possible stuff bit."""
+    return (bits_unstuffed(0) + 2 * n * bits_unstuffed(6),
+            bits_worst(0) + n * (2 * bits_worst(6) + bits_worst(1)))
 
 
 # ---- builds -----------------------------------------------------------------
