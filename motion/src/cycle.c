@@ -119,7 +119,24 @@ static void run_synchronous(struct motion *m, const struct ring *q)
 	}
 }
 
-/* No setpoint ready: done, idle, or (moving) an underrun. */
+/* The last setpoint sent (or none yet) stands still on every axis. */
+static bool last_at_rest(const struct motion *m)
+{
+	const struct motion_setpoint *l = &m->out.last;
+
+	for (unsigned i = 0; i < l->n_axes && i < MOTION_MAX_AXES; i++)
+		if (l->vel[i])
+			return false;
+	return true;
+}
+
+/* No setpoint ready: done, idle, or (moving) an underrun. A motion that
+ * accel has started from rest but whose first setpoint is not computed
+ * yet is not an underrun: the axes stand still, and waiting one more
+ * cycle there only delays the motion (the start race of threaded mode,
+ * where the send task's cycle can fall between accel taking the segment
+ * and a lane producing its first chunk). Only a gap after a moving
+ * setpoint breaks the trajectory. */
 static enum motion_status no_setpoint(struct motion *m,
 				      struct motion_setpoint *out)
 {
@@ -127,7 +144,7 @@ static enum motion_status no_setpoint(struct motion *m,
 	bool moving = atomic_load(&m->ip.active) > 0;
 	if (atomic_load(&m->ip.done) && !moving && interp_drained(&m->ip))
 		return hold(m, out, faulted ? MOTION_ST_FAULT : MOTION_ST_DONE);
-	if (!moving)
+	if (!moving || last_at_rest(m))
 		return hold(m, out, MOTION_ST_IDLE);
 	/* moving, and no setpoint: the planner fell behind */
 	m->out.underrun = true;

@@ -69,10 +69,13 @@ enum motion_flow { MOTION_FLOW_XON = 0, MOTION_FLOW_XOFF = 1 };
 
 enum motion_status {
 	MOTION_ST_MOVING = 0, /* a planned setpoint */
-	MOTION_ST_IDLE,       /* holding position, waiting for more input */
+	MOTION_ST_IDLE,       /* holding position, waiting for more input
+			       * (threaded mode: or for the first setpoint of
+			       * a motion from rest) */
 	MOTION_ST_DONE,       /* program ended (M2/M30 or end of stream) */
 	MOTION_ST_FAULT,      /* program error; motion came to rest, holding */
-	MOTION_ST_UNDERRUN,   /* threaded mode: no setpoint was ready (fault) */
+	MOTION_ST_UNDERRUN,   /* threaded mode: no setpoint was ready while the
+			       * axes moved (fault) */
 };
 
 struct motion_setpoint {
