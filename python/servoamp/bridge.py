@@ -23,10 +23,19 @@ gives the right to set parameters only to the URL with the bridge's token
 flushed every ``flush_interval`` s of host time (SIGKILL loses at most that),
 and a write error (a full disk) ends it cleanly: RecordingError, the file
 readable up to the last flush.
+
+CAN frames (``can_links``, bus -> canlink socket of our QEMU): every frame
+on each emulated bus, on /servoamp/can<bus> (CanFrame), read as a passive
+canlink client (QEMU never waits for it). Their clock is the emulator's
+virtual time; their log time is put on the cycle records' clock (the
+controller's CLOCK_MONOTONIC) by :class:`GuestClock` (from the cycle
+records and the servo core's time stamps on the bus), so that a frame
+sits in the cycle it was on the bus in. docs/recording.md "CAN frames".
 """
 
 from __future__ import annotations
 
+import collections
 import itertools
 import json
 import os
@@ -39,7 +48,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import foxglove
 from foxglove import Channel, Parameter, ParameterType, Schema
@@ -48,7 +57,7 @@ from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 from foxglove.messages import Log, LogLevel, Timestamp
 from foxglove.websocket import Capability, ServerListener, StatusLevel
 
-from servoamp import pbenc
+from servoamp import canlink, pbenc
 from servoamp import telemetry as tw
 from servoamp import wsfront
 from servoamp.record import RecordResult
@@ -76,6 +85,11 @@ T_SESSION = "/servoamp/session"
 CHANNELS = {T_CYCLE: "Cycle", T_PARAM: "ParamChange", T_STATS: "Stats", T_GAP: "Gap",
             T_QUEUES: "QueueLevels", T_SESSION: "Session"}
 TOPICS = sorted(list(CHANNELS) + [T_LOG])
+
+T_CAN = "/servoamp/can{bus}"   # one per CAN bus: CanFrame
+TIME_STAMP_ID = 0x1FF           # the master's time stamp PDO (canopen_master.h CO_COB_TIME_STAMP)
+# frames held while the clock offset is not known yet (the first cycles)
+CAN_PENDING_MAX = 1 << 17
 
 _LEVELS = {0: LogLevel.Unknown, 1: LogLevel.Debug, 2: LogLevel.Info, 3: LogLevel.Warning,
            4: LogLevel.Error, 5: LogLevel.Fatal}
@@ -137,6 +151,73 @@ def fox_param(name: str, typ: str, v: float | int) -> Parameter:
     return Parameter(name, value=int(v))
 
 
+class GuestClock:
+    """The emulator's virtual time (ns since the machine's reset, the clock
+    of canlink frames) on the controller's CLOCK_MONOTONIC (the clock of
+    the cycle records), through the servo core's global timer (gt), which
+    both sides see:
+
+    * gt - monotonic, from the cycle records: a fresh record holds the
+      cycle interrupt in both clocks (servod's wake-up ``t_ns`` minus its
+      wake-up latency, and ``t_cycle``, the servo core's global timer at
+      ``clock_hz``, 32 bits, at the start of the same cycle). The median of
+      the first SAMPLES records. Each ``t_cycle`` is unwrapped to the value
+      nearest the event (Linux's clocksource is the same timer: the two
+      differ by milliseconds, not by half a wrap, 21 s at 100 MHz).
+    * virtual - gt, from the master's time stamp on the bus (CiA 301
+      0x1013: the global timer in us, 32 bits, on PDO 0x1FF, the first frame
+      of a master's cycle, rpu_app/src/canopen_master.h): sent on an idle
+      bus, the frame starts when the servo core writes it, so its start on
+      the bus (its end minus its bits at the bit rate) is the stamp in
+      virtual time. Linux zeroes the global timer when it takes it as its
+      clocksource, so this is not a constant of the emulator; modulo 2^32 us
+      (71 min). A stamp behind other frames on the bus is not used.
+
+    Known once both are: a boot's constant."""
+
+    SAMPLES = 33
+    WRAP_US = 1 << 32
+
+    def __init__(self) -> None:
+        self.samples: list[int] = []
+        self.gt_minus_mono_ns: int | None = None
+        self.virt_minus_gt_ns: int | None = None
+
+    @property
+    def offset_ns(self) -> int | None:
+        """virtual - monotonic, once known."""
+        if self.gt_minus_mono_ns is None or self.virt_minus_gt_ns is None:
+            return None
+        return self.virt_minus_gt_ns + self.gt_minus_mono_ns
+
+    def add_cycle(self, t_ns: int, wake_latency_ns: int, t_cycle: int, clock_hz: int) -> bool:
+        """One fresh cycle record; True when this made the offset known."""
+        if self.gt_minus_mono_ns is not None or clock_hz <= 0:
+            return False
+        event = t_ns - wake_latency_ns
+        wrap = 1 << 32
+        k = round((event * clock_hz / 1e9 - t_cycle) / wrap)
+        gt_ns = (t_cycle + k * wrap) * 1_000_000_000 // clock_hz
+        self.samples.append(gt_ns - event)
+        if len(self.samples) < self.SAMPLES:
+            return False
+        self.gt_minus_mono_ns = sorted(self.samples)[len(self.samples) // 2]
+        return self.offset_ns is not None
+
+    def add_stamp(self, t_start_ns: int, stamp_us: int) -> bool:
+        """A time stamp that started on an idle bus at virtual t_start_ns;
+        True when this made the offset known."""
+        if self.virt_minus_gt_ns is not None:
+            return False
+        self.virt_minus_gt_ns = (t_start_ns - stamp_us * 1000) % (self.WRAP_US * 1000)
+        return self.offset_ns is not None
+
+    def to_monotonic(self, virt_ns: int) -> int:
+        off = self.offset_ns
+        assert off is not None
+        return max(0, virt_ns - off)
+
+
 class Bridge:
     """Telemetry client + Foxglove SDK sinks (WebSocket server, MCAP file)."""
 
@@ -148,6 +229,7 @@ class Bridge:
                  params: bool = True, ws_token: str | None = None,
                  allow_origins: list[str] | tuple[str, ...] = wsfront.DEFAULT_ORIGINS,
                  flush_interval: float = 1.0, keep_live: bool = False,
+                 can_links: Mapping[int, str | Path] | None = None,
                  on_progress: Callable[[RecordResult], None] | None = None) -> None:
         self.host, self.port = host, port
         self.auth = tw.encode_auth(token)
@@ -231,6 +313,104 @@ class Bridge:
                 str(mcap), allow_overwrite=True, context=self.ctx,
                 writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd,
                                                 chunk_size=1 << 20))
+        # CAN: a passive canlink client and a reader thread per bus
+        self.clock = GuestClock()
+        self.ch_can: dict[int, Channel] = {}
+        self.can_errors: dict[int, str] = {}
+        self.can_dropped = 0          # frames over CAN_PENDING_MAX before the clock was known
+        self._can_lock = threading.Lock()
+        self._can_pending: collections.deque[tuple[int, int, bytes]] = collections.deque()
+        self._can_stop = threading.Event()
+        self._can_threads: list[threading.Thread] = []
+        if can_links:
+            self._start_can(can_links)
+
+    # -- CAN frames -----------------------------------------------------------------------
+    def _start_can(self, can_links: Mapping[int, str | Path]) -> None:
+        links: dict[int, canlink.Link] = {}
+        try:
+            for bus, path in sorted(can_links.items()):
+                try:
+                    links[bus] = canlink.Link.connect(str(path), active=False, name="bridge",
+                                                      timeout=self.connect_timeout)
+                except (OSError, canlink.ProtocolError) as e:
+                    raise ConnectionError(f"CAN bus {bus}: canlink socket {path}: {e}") from e
+        except BaseException:
+            for lk in links.values():
+                lk.close()
+            self.close()
+            raise
+        for bus, lk in links.items():
+            self.ch_can[bus] = Channel(T_CAN.format(bus=bus), message_encoding="protobuf",
+                                       context=self.ctx,
+                                       schema=Schema(name="servoamp.CanFrame", encoding="protobuf",
+                                                     data=self.fds))
+            self.res.can_frames[bus] = 0
+            th = threading.Thread(target=self._can_loop, args=(bus, lk), daemon=True,
+                                  name=f"bridge-can{bus}")
+            self._can_threads.append(th)
+            th.start()
+
+    def _can_loop(self, bus: int, lk: canlink.Link) -> None:
+        """Reads one bus until close() or QEMU's BYE. A passive client must
+        keep reading: QEMU drops a client whose socket buffer is full."""
+        bit_ns = 1e9 / lk.bitrate
+        bus_free = 0        # end of the latest frame seen on this bus
+        try:
+            while not self._can_stop.is_set():
+                rec = lk.recv(0.2)
+                if rec is None:
+                    continue
+                if rec.type == canlink.BYE:
+                    break
+                if rec.type != canlink.FRAME:
+                    continue
+                data = rec.data[:rec.dlc] if not rec.rtr else b""
+                bits = canlink.frame_bits(rec.can_id, rec.eff, rec.rtr, rec.dlc, data)
+                msg = pb.CanFrame(bus=bus, t_bus_ns=rec.t_ns, id=rec.can_id, extended=rec.eff,
+                                  remote=rec.rtr, dlc=rec.dlc, data=data, bits=bits,
+                                  from_servo=not rec.info).SerializeToString()
+                start = rec.t_ns - round(bits * bit_ns)
+                stamp = (not rec.info and not rec.eff and not rec.rtr and rec.dlc == 4
+                         and rec.can_id == TIME_STAMP_ID and start >= bus_free)
+                bus_free = max(bus_free, rec.t_ns)
+                with self._can_lock:
+                    if stamp and self.clock.add_stamp(start, int.from_bytes(data, "little")):
+                        self._flush_can_pending()
+                    if self.clock.offset_ns is None:
+                        if len(self._can_pending) < CAN_PENDING_MAX:
+                            self._can_pending.append((bus, rec.t_ns, msg))
+                        else:
+                            self.can_dropped += 1
+                        continue
+                    self._log_can(bus, rec.t_ns, msg)
+        except (OSError, canlink.ProtocolError) as e:
+            self.can_errors[bus] = f"CAN bus {bus}: {e}"
+        finally:
+            lk.close()
+
+    def _log_can(self, bus: int, t_bus_ns: int, msg: bytes) -> None:
+        """Under _can_lock, the clock known."""
+        self.ch_can[bus].log(msg, log_time=self.clock.to_monotonic(t_bus_ns))
+        self.res.can_frames[bus] += 1
+        self._dirty = True
+
+    def _clock_sample(self, buf: bytearray, off: int) -> None:
+        """A cycle record for the CAN frames' clock (fresh exchanges only)."""
+        lat, exch = struct.unpack_from("<II", buf, off + 28)
+        if exch != 0:
+            return
+        t_ns, = struct.unpack_from("<Q", buf, off + 8)
+        t_cycle, = struct.unpack_from("<I", buf, off + 20)
+        hz = self.hello.clock_hz if self.hello is not None else 0
+        with self._can_lock:
+            if self.clock.add_cycle(t_ns, lat, t_cycle, hz):
+                self._flush_can_pending()
+
+    def _flush_can_pending(self) -> None:
+        """Under _can_lock, the clock just known."""
+        while self._can_pending:
+            self._log_can(*self._can_pending.popleft())
 
     # -- the app's side ----------------------------------------------------------------
     @property
@@ -278,14 +458,23 @@ class Bridge:
         if self.sock is not None:
             self.sock.close()
             self.sock = None
+        self._can_stop.set()
+        for th in self._can_threads:
+            th.join(timeout=5)
+        self._can_threads = []
         self._stop_servers()
         if self.mcap is not None:
             m, self.mcap = self.mcap, None
-            try:
-                m.write_metadata("servoamp.recording", {
-                    "cycles": str(self.res.cycles), "connections": str(self.res.connections),
+            meta = {"cycles": str(self.res.cycles), "connections": str(self.res.connections),
                     "gaps": str(len(self.res.gaps)), "stopped_by": self.res.stopped_by or "error",
-                    "last_stats": json.dumps(self.res.last_stats)})
+                    "last_stats": json.dumps(self.res.last_stats)}
+            if self.ch_can:
+                meta |= {"can_frames": json.dumps(self.res.can_frames),
+                         "can_pending_lost": str(self.can_dropped + len(self._can_pending)),
+                         "can_clock_offset_ns": str(self.clock.offset_ns),
+                         "can_errors": json.dumps(self.can_errors)}
+            try:
+                m.write_metadata("servoamp.recording", meta)
                 m.close()
             except (RuntimeError, OSError) as e:
                 self.record_error = self._record_error_text(e)
@@ -463,6 +652,8 @@ class Bridge:
                 if enc is None or ln < csize:
                     raise tw.ProtocolError(f"CYCLE of {ln} bytes, expected {csize}")
                 cyc, t_ns = cyc_from(buf, off)
+                if self.ch_can and self.clock.gt_minus_mono_ns is None:
+                    self._clock_sample(buf, off)
                 if cyc != self.expect:
                     self._cycle_discontinuity(cyc, t_ns)
                 self.expect = cyc + 1

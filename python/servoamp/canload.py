@@ -13,6 +13,7 @@ times the bit time over the period.
 from __future__ import annotations
 
 import argparse
+import re
 import statistics
 import sys
 from dataclasses import dataclass
@@ -23,6 +24,25 @@ import can
 from servoamp import canlink
 
 SYNC_ID = 0x080
+
+# The CANopen master's counters, one line per bus per statistics interval on
+# the servo core's UART (rpu_app/src/canopen_master.c, docs/fieldbus.md).
+MASTER_FIELDS = ("bus", "nodes_op", "sync", "sync_missed", "rpdo", "rpdo_missed", "tpdo",
+                 "pdo_missing", "pdo_missing_max", "emcy", "hb_timeouts", "faults", "sdo_ok",
+                 "sdo_fail", "rx_bad")
+_MASTER_RE = re.compile(r"^stats can=(\d+) " + " ".join(f"{f}=" + r"(\d+)" for f in MASTER_FIELDS[1:])
+                        + r"\r?$", re.M)
+
+
+def master_stats(text: str, bus: int | None = None) -> list[dict[str, int]]:
+    """The master's ``stats can=`` lines in ``text`` (a UART log, CR LF or
+    LF), in order, as dicts of MASTER_FIELDS; only bus ``bus``'s if given."""
+    out = []
+    for m in _MASTER_RE.finditer(text):
+        d = dict(zip(MASTER_FIELDS, map(int, m.groups())))
+        if bus is None or d["bus"] == bus:
+            out.append(d)
+    return out
 
 
 @dataclass(frozen=True)

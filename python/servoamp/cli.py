@@ -26,6 +26,13 @@ def _hostport(s: str) -> tuple[str, int]:
     return host.strip("[]") or "127.0.0.1", int(port)
 
 
+def _can_link(s: str) -> tuple[int, str]:
+    bus, eq, path = s.partition("=")
+    if not eq or not bus.isdigit() or not path:
+        raise argparse.ArgumentTypeError(f"expected BUS=SOCKET (0=build/can0.sock), got {s!r}")
+    return int(bus), path
+
+
 def _cmd_record(args: argparse.Namespace) -> int:
     from servoamp.record import record
     from servoamp.telemetry import read_token as tw_read_token
@@ -122,7 +129,8 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
                    serve=not args.no_server, mcap=args.mcap, reconnect=not args.no_reconnect,
                    connect_timeout=args.connect_timeout, params=not args.no_params,
                    ws_token=ws_token, allow_origins=[*DEFAULT_ORIGINS, *args.allow_origin],
-                   flush_interval=args.flush_interval, keep_live=args.keep_live)
+                   flush_interval=args.flush_interval, keep_live=args.keep_live,
+                   can_links=dict(args.can))
     except (OSError, RuntimeError, ValueError) as e:
         print(f"servoamp bridge: {e}", file=sys.stderr)
         return 4
@@ -215,6 +223,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="when the recording cannot be written (a full disk), go on serving "
                         "the live view instead of stopping (exit 5)")
     p.add_argument("--mcap", metavar="FILE.mcap", help="also write the channels to FILE")
+    p.add_argument("--can", type=_can_link, action="append", default=[], metavar="BUS=SOCKET",
+                   help="also carry every frame of emulated CAN bus BUS (its canlink socket, "
+                        "docs/canlink.md) on /servoamp/canBUS; repeat per bus")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: until SIGINT/SIGTERM)")
     p.add_argument("--no-reconnect", action="store_true",

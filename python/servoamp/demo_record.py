@@ -24,7 +24,8 @@ program ends (and at least --seconds).
 With ``--can`` the four axes are CiA 402 drives on the two CAN buses
 (rpu_app-can.elf, a servoamp-drivesim per bus in lockstep, docs/fieldbus.md):
 the drives' states are shown, each bus is logged by python-can
-(OUT/can0.asc, can1.asc) and its load per cycle printed.
+(OUT/can0.asc, can1.asc) and its load per cycle printed; the bridge
+carries every frame live and into the MCAP (/servoamp/can0, /servoamp/can1).
 """
 
 from __future__ import annotations
@@ -123,10 +124,13 @@ def main(argv: list[str] | None = None) -> int:
                  + " (servoamp-drivesim, lockstep on guest time); the servo core configures and enables them")
             _say("drives: " + " ".join(_wait_drives(cb, hello.n_axes)))
 
+        links = cb.can_socks if args.can else None   # every CAN frame into the MCAP, live too
         try:
-            b = Bridge("127.0.0.1", cb.host_port, token=cb.token, ws_port=args.ws_port, mcap=mcap)
+            b = Bridge("127.0.0.1", cb.host_port, token=cb.token, ws_port=args.ws_port, mcap=mcap,
+                       can_links=links)
         except RuntimeError:  # the port is taken
-            b = Bridge("127.0.0.1", cb.host_port, token=cb.token, ws_port=0, mcap=mcap)
+            b = Bridge("127.0.0.1", cb.host_port, token=cb.token, ws_port=0, mcap=mcap,
+                       can_links=links)
         box: dict[str, RecordResult] = {}
         stop = threading.Event()
         # with a program: recorded until it ends (on CAN drives in lockstep
@@ -170,6 +174,10 @@ def main(argv: list[str] | None = None) -> int:
          f"servod: cycles {stats.get('linux.cycles')}, telemetry pushed "
          f"{stats.get('telem.pushed')}, dropped {stats.get('telem.dropped')}, "
          f"client_lost {stats.get('telem.client_lost')}")
+    if res.can_frames:
+        _say("recorded CAN frames: " + ", ".join(f"/servoamp/can{k} {n}" for k, n in sorted(res.can_frames.items()))
+             + f" (on the cycles' clock, offset {b.clock.offset_ns} ns from the emulator's)"
+             + "".join(f"; {e}" for e in b.can_errors.values()))
     # the loggers' files are whole once QEMU has quit (BYE)
     for bus, path in asc.items():
         _say(canload.describe(f"bus load can{bus} ({path})", canload.cycle_load(canload.read_log(path), 1_000_000),

@@ -55,6 +55,8 @@ class RecordResult:
     bad_frames: int = 0
     bad_frames_by_type: dict[str, int] = field(default_factory=dict)
     flushes: int = 0
+    # servoamp bridge with CAN links: frames recorded per bus
+    can_frames: dict[int, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)

@@ -111,6 +111,9 @@ def opt(node, name: str, default):
     return default if p is None else p.val
 
 
+CO_MASTER_NODE_ID = 127   # canopen_master.h: the master's time stamp PDO is 0x180 + this
+
+
 def can_frame_bits(dlc: int) -> int:
     """Worst-case bits of a standard data frame (stuffing included)."""
     unstuffed = 34 + 8 * dlc          # SOF..CRC, the stuffed part
@@ -154,6 +157,9 @@ def fieldbus(servo, period_us: int, put, fail):
                 fail(a, f"servoamp,can-bus {bus}: the servo node has {len(ctrls)} can-controllers")
             if not 1 <= node <= 127:
                 fail(a, f"servoamp,node-id {node} must be 1..127")
+            if node == CO_MASTER_NODE_ID and opt(servo, "can-time-stamp-ms", 1000):
+                fail(a, f"servoamp,node-id {node} is the master's own (its time stamp PDO "
+                        f"0x{0x180 + CO_MASTER_NODE_ID:03x}): use 1..126, or can-time-stamp-ms = <0>")
             if (bus, node) in nodes:
                 fail(a, f"node id {node} on bus {bus} already used by {nodes[(bus, node)]}")
             nodes[(bus, node)] = a.path
@@ -170,6 +176,8 @@ def fieldbus(servo, period_us: int, put, fail):
         # worst-case stuffing (bench/fieldbus measured the busiest cycles
         # above the estimate without the heartbeats)
         bits = can_frame_bits(0) + n * (2 * can_frame_bits(6) + can_frame_bits(1))
+        if opt(servo, "can-time-stamp-ms", 1000):
+            bits += can_frame_bits(4)     # the master's time stamp, in its cycles
         budget = bitrate * period_us // 1_000_000
         if bits > budget:
             fail(servo, f"bus {b}: {n} axes need up to {bits} bit times per cycle, "
@@ -203,7 +211,8 @@ def fieldbus(servo, period_us: int, put, fail):
     for name, dflt, lo, hi in (("can-heartbeat-producer-ms", 20, 1, 65535),
                                ("can-heartbeat-consumer-ms", 60, 1, 65535),
                                ("can-sdo-timeout-ms", 50, 1, 65535),
-                               ("can-boot-timeout-ms", 500, 1, 65535)):
+                               ("can-boot-timeout-ms", 500, 1, 65535),
+                               ("can-time-stamp-ms", 1000, 0, 65535)):
         v = opt(servo, name, dflt)
         if not lo <= v <= hi:
             fail(servo, f"{name} must be {lo}..{hi}")

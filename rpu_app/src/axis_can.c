@@ -15,8 +15,10 @@
  *                         heartbeats, EMCY, SDO answers)
  *   can_cycle (per axis)  the axis's target and enable request for the
  *                         master; its feedback from the last TPDO1
- *   axis_can_cycle_end    each master's cycle: start-up steps, one RPDO
- *                         per operational drive, then the SYNC
+ *   axis_can_cycle_end    each master's cycle: its time stamp when due
+ *                         (the global timer in us, canopen_master.h),
+ *                         start-up steps, one RPDO per operational
+ *                         drive, then the SYNC
  * Nothing here waits for the bus: a full TX FIFO is counted (co_stats).
  *
  * Where the drive state and error code live: struct co_node (state402,
@@ -117,6 +119,7 @@ void axis_can_init(const struct axis_params *k)
 		.boot_timeout_ms = BOARD_CAN_BOOT_TIMEOUT_MS,
 		.boot_retries = 3,
 		.sdo_retries = 2,
+		.stamp_ms = BOARD_CAN_TIME_STAMP_MS,
 	};
 	struct canps_timing t;
 
@@ -201,9 +204,13 @@ void axis_can_cycle_begin(void)
 
 void axis_can_cycle_end(void)
 {
-	for (uint32_t b = 0; b < NBUS; b++)
-		if (bus[b].ok)
-			co_master_cycle(&bus[b].m);
+	for (uint32_t b = 0; b < NBUS; b++) {
+		if (!bus[b].ok)
+			continue;
+		if (co_master_stamp_due(&bus[b].m))
+			co_master_time_stamp(&bus[b].m, (uint32_t)(gtimer_now() / BOARD_GTIMER_TICKS_PER_US));
+		co_master_cycle(&bus[b].m);
+	}
 }
 
 void axis_can_stop(void)

@@ -178,10 +178,12 @@ int co_master_init(struct co_master *m, co_send_fn send, void *ctx, const struct
 	m->hb_consumer_cycles = ms_to_cycles(cfg->hb_consumer_ms, cfg->period_us);
 	m->sdo_timeout_cycles = ms_to_cycles(cfg->sdo_timeout_ms, cfg->period_us);
 	m->boot_timeout_cycles = ms_to_cycles(cfg->boot_timeout_ms, cfg->period_us);
+	m->stamp_cycles = cfg->stamp_ms ? ms_to_cycles(cfg->stamp_ms, cfg->period_us) : 0u;
 	for (uint32_t i = 0; i < n_nodes; i++) {
 		uint8_t id = node_ids[i];
 
-		if (id < 1u || id > 127u || m->index_of[id] != NO_NODE)
+		if (id < 1u || id > 127u || m->index_of[id] != NO_NODE ||
+		    (m->stamp_cycles && id == CO_MASTER_NODE_ID))
 			return -1;
 		m->index_of[id] = (uint8_t)i;
 		m->node[i].node_id = id;
@@ -202,6 +204,23 @@ void co_master_start(struct co_master *m)
 		n->sdo_busy = 0;
 		n->hb_armed = 0;
 	}
+}
+
+int co_master_stamp_due(const struct co_master *m)
+{
+	return m->stamp_cycles && m->cycle % m->stamp_cycles == 0u;
+}
+
+void co_master_time_stamp(struct co_master *m, uint32_t now_us)
+{
+	struct can_frame f;
+
+	frame_clear(&f);
+	f.id = CO_COB_TIME_STAMP;
+	f.dlc = 4;
+	wr_le(f.data, now_us, 4);
+	if (tx(m, &f) == 0)
+		m->st.stamps_sent++;
 }
 
 void co_master_set(struct co_master *m, uint32_t idx, int enable, int32_t target)

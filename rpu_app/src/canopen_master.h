@@ -91,6 +91,7 @@ struct co_config {
 	uint16_t boot_timeout_ms;	/* boot-up after an NMT reset */
 	uint8_t boot_retries;		/* NMT resets before CO_ERR_BOOT_TIMEOUT */
 	uint8_t sdo_retries;		/* per request, on timeout */
+	uint16_t stamp_ms;		/* the master's time stamp every this often, 0: never */
 };
 
 struct co_node {
@@ -145,6 +146,7 @@ struct co_stats {
 	uint32_t bus_off;		/* bus-off events reported (co_master_bus_off) */
 	uint32_t faults;		/* axis faults raised */
 	uint32_t nodes_operational;	/* nodes now in CO_PH_OPERATIONAL */
+	uint32_t stamps_sent;		/* time stamps (co_master_time_stamp) */
 };
 
 struct co_master {
@@ -152,14 +154,27 @@ struct co_master {
 	void *ctx;
 	struct co_config cfg;
 	uint32_t cycle;
-	uint32_t hb_consumer_cycles, sdo_timeout_cycles, boot_timeout_cycles;
+	uint32_t hb_consumer_cycles, sdo_timeout_cycles, boot_timeout_cycles, stamp_cycles;
 	uint32_t n_nodes;
 	struct co_node node[CO_MAX_NODES];
 	uint8_t index_of[128];	/* node id -> node[] index, 0xFF: not ours */
 	struct co_stats st;
 };
 
-/* 0, or -1 for a node id out of 1..127, a duplicate, or too many nodes. */
+/*
+ * The master's clock on the bus: CiA 301's high-resolution time stamp
+ * (object 0x1013, UNSIGNED32, microseconds), sent as a PDO of the master's
+ * own node id, CO_MASTER_NODE_ID, every cfg.stamp_ms, as the first frame of
+ * its cycle (the bus is idle then: the drives answered the last SYNC long
+ * before). A host that sees the frame's time on the bus (servoamp bridge)
+ * relates the servo core's clock to it (docs/fieldbus.md "Time stamp").
+ * With stamps on, no drive may take that node id.
+ */
+#define CO_MASTER_NODE_ID 127u
+#define CO_COB_TIME_STAMP (0x180u + CO_MASTER_NODE_ID)
+
+/* 0, or -1 for a node id out of 1..127 (1..126 with time stamps), a
+ * duplicate, or too many nodes. */
 int co_master_init(struct co_master *m, co_send_fn send, void *ctx, const struct co_config *cfg,
 		   const uint8_t *node_ids, uint32_t n_nodes);
 /* Begin the start-up of every node (NMT reset on the next cycle). */
@@ -168,6 +183,10 @@ void co_master_start(struct co_master *m);
 void co_master_rx(struct co_master *m, const struct can_frame *f);
 /* One cycle: timeouts, start-up steps, RPDOs then SYNC. */
 void co_master_cycle(struct co_master *m);
+/* 1 when the next co_master_cycle is a time-stamp cycle (then call
+ * co_master_time_stamp first, with the time read just before). */
+int co_master_stamp_due(const struct co_master *m);
+void co_master_time_stamp(struct co_master *m, uint32_t now_us);
 /* The axis' command for the next cycle's RPDO. */
 void co_master_set(struct co_master *m, uint32_t idx, int enable, int32_t target);
 /* The bus went off (and was restarted by the driver): every operational

@@ -33,9 +33,11 @@ def cb() -> ModuleType:
 def test_analytic_bits_match_the_firmware_generator(cb: ModuleType) -> None:
     # gen_board_header.py's worst case: SYNC 55, a 6-byte PDO 115 bit
     # times, a heartbeat 65 per drive (BOARD_CANn_LOAD_PERMILLE 645 for two
-    # drives at 1 kHz, tests/rpu_app/test_rpu_devicetree.py)
+    # drives at 1 kHz with the master's time stamp off, as the bench's
+    # overlays have it; tests/rpu_app/test_rpu_devicetree.py)
     assert cb.analytic_bits(2) == (47 + 4 * 95, 645)
     assert cb.analytic_bits(3)[1] == 940 and cb.analytic_bits(4)[1] == 1235
+    assert "can-time-stamp-ms = <0>;" in cb.overlay(1000, {0: 2})
     sync = canlink.frame_bits(0x080, False, False, 0, b"")
     assert 47 <= sync <= cb.bits_worst(0)
 

@@ -367,3 +367,43 @@ def test_cli_sigint_leaves_a_finalized_file(feed_bin: Path, tmp_path: Path) -> N
     assert res["stopped_by"] == "signal" and res["cycles"] > 0
     s = info.summarize(out)
     assert s["complete"] and s["cycles"] == res["cycles"]
+
+
+def test_guest_clock_offset_from_cycle_records_and_stamps() -> None:
+    """bridge.GuestClock: the emulator's virtual time on the cycle records'
+    clock. gt - monotonic from (t_ns, wake-up latency, t_cycle) of fresh
+    records (median of SAMPLES, 32-bit t_cycle unwrapped), virtual - gt
+    from the master's time stamp (32-bit us) at its start on the bus."""
+    hz = 100_000_000
+    gt_mono = 6_512_000                 # the global timer ahead of CLOCK_MONOTONIC
+    virt_gt = 103_456_789_000           # virtual time when Linux zeroed the timer: 103 s
+    wrap_s = (1 << 32) / hz             # 42.9 s
+    for start_s in (5.0, wrap_s - 0.01, 3 * wrap_s + 7.0):   # before, at and after wraps
+        c = bridge.GuestClock()
+        known = []
+        for k in range(bridge.GuestClock.SAMPLES):
+            event = int((start_s + k * 1e-3) * 1e9)          # the cycle interrupt, monotonic
+            lat = 20_000 + 1_000 * (k % 7)
+            ticks = ((event + gt_mono) * hz // 1_000_000_000 + 3) % (1 << 32)   # servo: 3 ticks late
+            if k == 5:
+                ticks = (ticks - hz // 1000) % (1 << 32)       # a record of the cycle before
+            known.append(c.add_cycle(event + lat, lat, ticks, hz))
+        assert not any(known) and c.offset_ns is None       # no stamp yet
+        assert c.gt_minus_mono_ns is not None and abs(c.gt_minus_mono_ns - gt_mono) <= 40
+        gt_us = int(start_s * 1e6) + 1234                   # a stamp: the timer in us, 32 bits
+        assert c.add_stamp(virt_gt + gt_us * 1000, gt_us % (1 << 32))
+        off = virt_gt + gt_mono
+        assert c.offset_ns is not None and abs(c.offset_ns - off) <= 40, (start_s, c.offset_ns)
+        assert abs(c.to_monotonic(off + 2_000_000_000) - 2_000_000_000) <= 40
+        # known once and for all: later records and stamps do not move it
+        assert not c.add_cycle(10**12, 0, 0, hz) and not c.add_stamp(0, 5)
+        assert abs(c.offset_ns - off) <= 40
+    # the stamp first, then the records
+    c = bridge.GuestClock()
+    assert not c.add_stamp(virt_gt + 7_000_000, 7_000)
+    assert [c.add_cycle(10**9 + 10**6 * k, 0, (10**9 + 10**6 * k) // 10, hz)
+            for k in range(bridge.GuestClock.SAMPLES)][-1] is True
+    assert c.offset_ns == virt_gt
+    # no clock rate in the HELLO: never known (frames wait, counted as lost at the end)
+    c = bridge.GuestClock()
+    assert not any(c.add_cycle(10**9, 0, 1000, 0) for _ in range(50)) and c.offset_ns is None

@@ -771,9 +771,55 @@ static void test_fuzz(void)
 	CHECK(m.st.rx_bad > 0);
 }
 
+/* The master's time stamp: every stamp_ms, the first frame of its cycle,
+ * 0x1013's microseconds little-endian on PDO 0x1FF; node id 127 is the
+ * master's while stamps are on; a refused send is not counted. */
+static void test_time_stamp(void)
+{
+	struct co_config cfg = CFG;
+	struct co_master m;
+	uint8_t ids[] = { 1, 2 }, id127[] = { 127 };
+	unsigned stamps = 0;
+
+	cfg.stamp_ms = 5;
+	CHECK(co_master_init(&m, fake_send, NULL, &cfg, id127, 1) != 0);
+	CHECK_EQ(co_master_init(&m, fake_send, NULL, &CFG, id127, 1), 0);	/* stamps off */
+	CHECK(!co_master_stamp_due(&m));
+	CHECK_EQ(co_master_init(&m, fake_send, NULL, &cfg, ids, 2), 0);
+	n_to_master = 0;
+	tx_busy_left = 0;
+	for (int i = 0; i < ND; i++)
+		drive_reset(&drv[i], (uint8_t)(i + 1));
+	co_master_start(&m);
+	for (uint32_t c = 0; c < 12u; c++) {
+		unsigned first = sent_log_n;
+
+		if (co_master_stamp_due(&m)) {
+			CHECK_EQ(c % 5u, 0);
+			co_master_time_stamp(&m, 0x12345670u + c);
+			CHECK(sent_log_n == first + 1u);
+			CHECK_EQ(sent_log[first].id, CO_COB_TIME_STAMP);
+			CHECK_EQ(sent_log[first].dlc, 4);
+			CHECK_EQ(sent_log[first].data[0], 0x70u + c);
+			CHECK_EQ(sent_log[first].data[3], 0x12);
+			stamps++;
+		}
+		co_master_cycle(&m);
+		deliver(&m);
+		drives_tick();
+	}
+	CHECK_EQ(stamps, 3);
+	CHECK_EQ(m.st.stamps_sent, 3);
+	tx_busy_left = 1;
+	co_master_time_stamp(&m, 1);
+	CHECK_EQ(m.st.stamps_sent, 3);
+	CHECK_EQ(m.st.tx_busy, 1);
+}
+
 int main(void)
 {
 	test_init_checks();
+	test_time_stamp();
 	test_enable_sequence();
 	test_no_jump_on_enable();
 	test_wrong_mapping_and_abort();

@@ -27,10 +27,10 @@ import pytest
 from qemu_rpu import QemuRpu, _symbol
 from rpu_common import BOARD, REPO, _make
 
+from servoamp import canload
+
 CAN_DTS = REPO / "boards" / BOARD / "servo-can.dts"
-CAN_STATS_RE = (r"^stats can={bus} nodes_op=(\d+) sync=(\d+) sync_missed=(\d+) rpdo=(\d+) rpdo_missed=(\d+) "
-                r"tpdo=(\d+) pdo_missing=(\d+) pdo_missing_max=(\d+) emcy=(\d+) hb_timeouts=(\d+) "
-                r"faults=(\d+) sdo_ok=(\d+) sdo_fail=(\d+) rx_bad=(\d+)$")
+
 
 
 def canlink_qemu() -> str:
@@ -152,17 +152,17 @@ def _run(can_build: Path, tmp_path: Path, buses: list[int], axes_mask: int, monk
         q.wait_uart(last, count=n0 + 2, timeout=120)
         text = q.uart_text()
         for b in buses:
-            st = [tuple(map(int, m.groups())) for m in re.finditer(CAN_STATS_RE.format(bus=b), text, re.M)]
+            st = canload.master_stats(text, b)
             assert len(st) >= 2, text[-3000:]
-            nodes_op, sync, sync_missed, rpdo, _, tpdo, pdo_missing, _, emcy, hb_to, faults, sdo_ok, \
-                sdo_fail, rx_bad = st[-1]
-            assert nodes_op == 2, st[-1]
-            assert sync_missed == 0 and sync > 1000
-            assert emcy == 0 and hb_to == 0 and faults == 0 and sdo_fail == 0 and rx_bad == 0, st[-1]
-            assert sdo_ok == 2 * 13
+            s = st[-1]
+            assert s["nodes_op"] == 2, s
+            assert s["sync_missed"] == 0 and s["sync"] > 1000
+            assert s["emcy"] == s["hb_timeouts"] == s["faults"] == s["sdo_fail"] == s["rx_bad"] == 0, s
+            assert s["sdo_ok"] == 2 * 13
             # after start-up every SYNC is answered by both drives
-            assert st[-1][6] == st[-2][6], f"TPDOs missing between the last two intervals: {st[-2]} {st[-1]}"
-            assert tpdo > 0 and rpdo > 0
+            assert s["pdo_missing"] == st[-2]["pdo_missing"], \
+                f"TPDOs missing between the last two intervals: {st[-2]} {s}"
+            assert s["tpdo"] > 0 and s["rpdo"] > 0
         assert "FAULT" not in text
         return text
 

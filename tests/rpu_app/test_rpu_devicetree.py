@@ -127,8 +127,10 @@ def test_can_board_four_drives_two_per_bus(tmp_path):
     assert cfg["BOARD_CAN_PRIORITY"] < cfg["BOARD_CYCLE_PRIORITY"]
     assert cfg["BOARD_CAN_HEARTBEAT_CONSUMER_MS"] > cfg["BOARD_CAN_HEARTBEAT_PRODUCER_MS"]
     # SYNC + 2 x (RPDO + TPDO), worst-case stuffing, at 1 Mbit/s and 1 kHz
-    # SYNC 55 + 2 x (RPDO 115 + TPDO 115 + heartbeat 65) worst-case bits of 1000
-    assert cfg["BOARD_CAN0_LOAD_PERMILLE"] == cfg["BOARD_CAN1_LOAD_PERMILLE"] == 645
+    # SYNC 55 + 2 x (RPDO 115 + TPDO 115 + heartbeat 65) + the master's time
+    # stamp 95 (can-time-stamp-ms) worst-case bits of 1000
+    assert cfg["BOARD_CAN_TIME_STAMP_MS"] == 1000
+    assert cfg["BOARD_CAN0_LOAD_PERMILLE"] == cfg["BOARD_CAN1_LOAD_PERMILLE"] == 740
     for k, v in CONTRACT.items():
         assert cfg[k] == v, k
     mmu = re.findall(r"X\((0x[0-9a-f]+)u, (0x[0-9a-f]+)u, (MMU_\w+)\)", hdr)
@@ -153,11 +155,26 @@ def _can_variant(tmp_path, axis_body: str, extra: str = ""):
     ('&axis3 { reg = <5>; };', "without gaps"),
     ('&servo { can-priority = <0xa8>; };', "can-priority"),
     ('&servo { can-heartbeat-consumer-ms = <10>; };', "can-heartbeat-consumer-ms"),
+    ('&axis0 { servoamp,backend = "can"; servoamp,can-bus = <0>; servoamp,node-id = <127>; };',
+     "the master's own"),
+    ('&servo { can-time-stamp-ms = <70000>; };', "can-time-stamp-ms"),
 ])
 def test_generator_rejects_bad_axes(tmp_path, body, msg):
     r = _can_variant(tmp_path, body)
     assert r.returncode != 0, "accepted:\n" + body
     assert msg in r.stderr, r.stderr
+
+
+def test_node_127_with_the_time_stamp_off(tmp_path):
+    """Node id 127 is the master's (its time stamp PDO 0x1FF) only while
+    the master sends time stamps; off, a drive may take it, and the
+    worst-case bus load leaves the stamp out."""
+    r = _can_variant(tmp_path, '&axis0 { servoamp,backend = "can"; servoamp,can-bus = <0>; '
+                               'servoamp,node-id = <127>; };', '&servo { can-time-stamp-ms = <0>; };')
+    assert r.returncode == 0, r.stderr
+    cfg = parse_board_config(tmp_path / "out" / "board_config.h")
+    assert cfg["BOARD_CAN_TIME_STAMP_MS"] == 0
+    assert cfg["BOARD_CAN0_LOAD_PERMILLE"] == (55 + 115 + 115 + 65) * 1000 // 1000
 
 
 def test_generator_rejects_a_bus_over_budget(tmp_path):

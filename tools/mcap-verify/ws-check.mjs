@@ -17,6 +17,9 @@
 // --readonly: the connection is expected to be read-only (no token in URL):
 //    the good value's set must come back as an error status with the value
 //    unchanged (and no change on /servoamp/param).
+// --frames TOPIC:N: also subscribes to TOPIC (a CAN bus, /servoamp/can0) and
+//    waits for N of its messages after the cycles: counts them per CAN id
+//    and keeps the first 20 (id, t_bus_ns, log time).
 // --origin: the Origin header a browser page of that origin would send.
 // Prints one JSON object with what it saw; exit status 0 when it got through
 // every step, 1 otherwise (the JSON says where it stopped).
@@ -42,6 +45,9 @@ const good = Number(opt("--good", "NaN"));
 const bad = Number(opt("--bad", "NaN"));
 const origin = opt("--origin", null);
 const readonly = argv.includes("--readonly");
+const framesOpt = opt("--frames", null);
+const framesTopic = framesOpt ? framesOpt.slice(0, framesOpt.lastIndexOf(":")) : null;
+const framesWanted = framesOpt ? Number(framesOpt.slice(framesOpt.lastIndexOf(":") + 1)) : 0;
 
 const out = {
   url,
@@ -55,6 +61,7 @@ const out = {
   set_bad: null,
   statuses: [],
   list_after: null,
+  frames: framesTopic ? { topic: framesTopic, count: 0, by_id: {}, first: [] } : null,
   ok: false,
 };
 
@@ -106,7 +113,7 @@ client.on("close", () => {
 client.on("advertise", (channels) => {
   for (const ch of channels) {
     out.channels.push({ topic: ch.topic, encoding: ch.encoding, schemaName: ch.schemaName });
-    if (ch.topic === "/servoamp/cycle" || ch.topic === "/servoamp/param") {
+    if (ch.topic === "/servoamp/cycle" || ch.topic === "/servoamp/param" || ch.topic === framesTopic) {
       const id = client.subscribe(ch.id);
       subs.set(id, { topic: ch.topic, type: pbType(ch) });
     }
@@ -122,6 +129,15 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
   if (!sub) return;
   const bytes = new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
   const m = sub.type.toObject(sub.type.decode(bytes), { longs: String, defaults: true });
+  if (sub.topic === framesTopic) {
+    const f = out.frames;
+    f.count++;
+    const id = `0x${m.id.toString(16)}`;
+    f.by_id[id] = (f.by_id[id] ?? 0) + 1;
+    if (f.first.length < 20) f.first.push({ id, t_bus_ns: m.tBusNs, log_time: timestamp, from_servo: m.fromServo });
+    if (f.count >= framesWanted) emit({ kind: "frames_done" });
+    return;
+  }
   if (sub.topic === "/servoamp/param") {
     out.param_changes.push({ name: m.name, value: m.value });
     emit({ kind: "param", m });
@@ -165,6 +181,10 @@ function done() {
   out.step = "cycles";
   await waitFor((e) => e.kind === "cycles_done");
   for (const [id, s] of subs) if (s.topic === "/servoamp/cycle") client.unsubscribe(id);
+  if (framesTopic && out.frames.count < framesWanted) {
+    out.step = `frames on ${framesTopic}`;
+    await waitFor((e) => e.kind === "frames_done");
+  }
   if (pname) {
     out.step = "list";
     let ev = waitFor((e) => e.kind === "params" && e.pv.id === "list1");

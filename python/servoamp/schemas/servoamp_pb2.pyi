@@ -200,3 +200,25 @@ class Session(_message.Message):
     ring_capacity: int
     realtime_ns: int
     def __init__(self, connection: _Optional[int] = ..., controller_id: _Optional[str] = ..., session_id: _Optional[str] = ..., wire_version: _Optional[int] = ..., n_axes: _Optional[int] = ..., cycle_period_ns: _Optional[int] = ..., clock_hz: _Optional[int] = ..., ring_capacity: _Optional[int] = ..., realtime_ns: _Optional[int] = ...) -> None: ...
+
+class CanFrame(_message.Message):
+    __slots__ = ("bus", "t_bus_ns", "id", "extended", "remote", "dlc", "data", "bits", "from_servo")
+    BUS_FIELD_NUMBER: _ClassVar[int]
+    T_BUS_NS_FIELD_NUMBER: _ClassVar[int]
+    ID_FIELD_NUMBER: _ClassVar[int]
+    EXTENDED_FIELD_NUMBER: _ClassVar[int]
+    REMOTE_FIELD_NUMBER: _ClassVar[int]
+    DLC_FIELD_NUMBER: _ClassVar[int]
+    DATA_FIELD_NUMBER: _ClassVar[int]
+    BITS_FIELD_NUMBER: _ClassVar[int]
+    FROM_SERVO_FIELD_NUMBER: _ClassVar[int]
+    bus: int
+    t_bus_ns: int
+    id: int
+    extended: bool
+    remote: bool
+    dlc: int
+    data: bytes
+    bits: int
+    from_servo: bool
+    def __init__(self, bus: _Optional[int] = ..., t_bus_ns: _Optional[int] = ..., id: _Optional[int] = ..., extended: _Optional[bool] = ..., remote: _Optional[bool] = ..., dlc: _Optional[int] = ..., data: _Optional[bytes] = ..., bits: _Optional[int] = ..., from_servo: _Optional[bool] = ...) -> None: ...
