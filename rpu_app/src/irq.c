@@ -34,6 +34,7 @@ static uint32_t nest_max;
  * every path (irq_release_all, the fault handler) completes them. */
 static volatile uint32_t in_service[NEST_MAX];
 static uint32_t spurious, unhandled, disabled, disabled_last;
+static volatile uint32_t taken;	/* interrupts handled (a registered handler ran) */
 /* Debug (SP_DEBUG_IRQ_ABORT): ID + 1 of the interrupt whose next dispatch
  * faults right after its acknowledge; 0: off. The QEMU tests without Linux
  * write it through the gdbstub by symbol. Cleared by irq_init. */
@@ -191,6 +192,11 @@ uint32_t irq_disabled_last(void)
 	return disabled_last;
 }
 
+uint32_t irq_taken(void)
+{
+	return taken;
+}
+
 void irq_dispatch(void)
 {
 	uint32_t iar = gic_ack();
@@ -247,6 +253,7 @@ void irq_dispatch(void)
 			d->clear(d->arg);
 
 		d->st.count++;
+		taken++;
 		if (depth > d->st.nest_max)
 			d->st.nest_max = depth;
 		if (lat != IRQ_LATENCY_NONE) {

@@ -73,6 +73,7 @@ uint32_t irq_spurious(void);
 uint32_t irq_unhandled(void);		/* interrupts taken without a handler */
 uint32_t irq_disabled(void);		/* of those, disabled at the GIC distributor */
 uint32_t irq_disabled_last(void);	/* ID of the last one disabled (0: none) */
+uint32_t irq_taken(void);		/* interrupts handled by a registered handler (wraps) */
 
 void irq_dispatch(void);	/* called by irq_entry (start.S) */
 

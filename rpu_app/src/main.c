@@ -293,7 +293,7 @@ static void banner(void)
 
 __attribute__((noreturn)) void servo_main(void)
 {
-	uint32_t gt_ps, last_stats = 0, slept_at = 0, slept_wakes = 0;
+	uint32_t gt_ps, last_stats = 0, slept_taken = 0;
 	int uart_ok;
 
 	cycles = 0;
@@ -405,13 +405,16 @@ __attribute__((noreturn)) void servo_main(void)
 		/* Sleep until the next interrupt while the distributor is
 		 * enabled by its owner: the cycle interrupt, or at the latest
 		 * the idle wake (idle_timer.h), so STOP is seen even when
-		 * cycle interrupts stop. Without the idle wake, only while
-		 * cycle interrupts keep arriving (one came since the last
-		 * sleep); else the loop polls. */
-		if (CONFIG_IDLE_WFI && gic_dist_enabled() &&
-		    (idle_timer_wakes() != slept_wakes || c != slept_at)) {
-			slept_wakes = idle_timer_wakes();
-			slept_at = c;
+		 * cycle interrupts stop. Only while interrupts keep arriving
+		 * (one of ours was handled since the last sleep); else the
+		 * loop polls. Any interrupt counts, not only the cycle and the
+		 * idle wake: a wake by another source (a CAN controller's RX,
+		 * every cycle on the fieldbus) used to leave the loop polling
+		 * until the next cycle interrupt, most of every cycle, and
+		 * under -icount a polling CPU1 takes every other turn from
+		 * CPU0 (Linux), which then woke servod up to 500 us late. */
+		if (CONFIG_IDLE_WFI && gic_dist_enabled() && irq_taken() != slept_taken) {
+			slept_taken = irq_taken();
 			wfi();
 		}
 	}
