@@ -192,10 +192,13 @@ def build_stub(board: Board, park_wfe: bool = True) -> Path:
     return out / f"{name}.bin"
 
 
-def build_dtb(board: Board, ksrc: Path, initramfs: Path | None = None) -> Path:
+def build_dtb(board: Board, ksrc: Path, initramfs: Path | None = None, out_dir: Path | None = None) -> Path:
     """cpp + dtc on the board's Linux DTS (warnings are errors), then put the
-    initramfs location into /chosen."""
-    out = board.build_dir
+    initramfs location into /chosen. ``out_dir``: where linux.dtb goes
+    (default: the board's build directory; a benchmark booting an initramfs
+    of its own passes its own directory, so that the board's DTB, which
+    other boots read, keeps its /chosen)."""
+    out = out_dir or board.build_dir
     out.mkdir(parents=True, exist_ok=True)
     dts = board.folder / str(board.data["linux"]["dts"])
     pre = out / "linux.dts.pp"
