@@ -360,6 +360,10 @@ def window(sh: Callable[..., str], tel: Telemetry, nport: int, load: str, cycles
         sh(f"({loop}) >/dev/null 2>&1 & echo $! >> /tmp/load.pids")
     sender = None
     if load == "net":
+        # the guest's sink, one per window; nc reads its stdin too: a pipe
+        # that never delivers (a background job reading the console is
+        # stopped by SIGTTIN, and the transfer with it)
+        sh(f"(sleep 100000 | nc -l -p {SINK_PORT} > /dev/null 2>&1) & echo $! > /tmp/sink.pid")
         sender = Sender(nport)
         sender.start()
     sh("rm -f /tmp/ct.txt; (cyclictest -m -q -p %d -i %d -l %d -h %d > /tmp/ct.txt 2>&1; echo done >> /tmp/ct.txt) & echo $! > /tmp/ct.pid"
@@ -378,6 +382,7 @@ def window(sh: Callable[..., str], tel: Telemetry, nport: int, load: str, cycles
     if sender:
         sender.stop_ev.set()
         sender.join(5)
+        sh("killall nc sleep 2>/dev/null; true")
     if LOADS[load]:
         sh("kill $(cat /tmp/load.pids); rm -f /tmp/load.pids; sleep 0.2; killall hackbench 2>/dev/null; true")
 
@@ -435,7 +440,6 @@ def run_kernel(board: qemu.Board, kernel: str, cycles: int, rates: list[int], lo
         sh(f"servoamp-net {GUEST_ADDR}/24", 60)
         out["rt_tests"] = sh("cyclictest --help 2>&1 | head -1; hackbench --help 2>&1 | head -1; true")
         sh(f"umask 077; echo {token} > {TOKEN_FILE}")
-        sh(f"(while :; do nc -l -p {SINK_PORT} > /dev/null 2>&1; done) & echo $! > /tmp/sink.pid")
         sh(f"(servod --telemetry {GUEST_ADDR}:{TELEMETRY_PORT} --telemetry-token {TOKEN_FILE} "
            "> /tmp/servod.log 2>&1 &)")
         sh("while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done")
