@@ -90,6 +90,12 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           (),
           ("{python}", "bench/fieldbus/can_bench.py", "--json", "{json}"),
           ("--quick",)),
+    Bench("rt_latency", "servod's wake-up and cyclictest on both kernels (default, PREEMPT_RT) at 1 and 4 kHz, "
+          "idle and under hackbench, a CPU hog, bulk TCP and a recovery (virtual time)",
+          True, "about 20 min at 10,000 cycles per window (two kernel boots, 20 windows; 100,000: about 2.5 h)",
+          (),
+          ("{python}", "bench/cycle/rt_latency_bench.py", "--json", "{json}"),
+          ("--cycles", "500", "--loads", "idle,cpu")),
     Bench("recorder", "recording encodings, JSON (servoamp record) vs protobuf (servoamp bridge, foxglove-sdk): "
           "bytes/cycle, CPU per 1000 cycles, max rate x axes at 4 and 8 axes",
           False, "about 2-3 min (one rate ramp per encoding and axis count)",
