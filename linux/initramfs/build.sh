@@ -71,25 +71,12 @@ flock 9
 deb=$(ls "$bbdir"/busybox-static_*_armhf.deb 2>/dev/null | tail -1 || true)
 if [ -z "$deb" ]; then
 	apt_root=$bbdir/apt
-	mkdir -p "$apt_root/lists/partial" "$apt_root/cache/archives/partial" "$apt_root/etc/preferences.d"
+	private_apt_setup "$apt_root" -o "APT::Architecture=armhf" -o "APT::Architectures::=armhf"
 	mirror=$(debian_mirror) || die "cannot find the Debian mirror in /etc/apt"
 	echo "deb [arch=armhf] $mirror bookworm main" >"$apt_root/etc/sources.list"
-	: >"$apt_root/status"
-	apt_opts=(
-		-o "Dir::Etc::SourceList=$apt_root/etc/sources.list"
-		-o "Dir::Etc::SourceParts=-"
-		-o "Dir::Etc::PreferencesParts=$apt_root/etc/preferences.d"
-		-o "Dir::State::Lists=$apt_root/lists"
-		-o "Dir::State::Status=$apt_root/status"
-		-o "Dir::Cache=$apt_root/cache"
-		-o "APT::Architecture=armhf"
-		-o "APT::Architectures::=armhf"
-		-o "Debug::NoLocking=1"
-		-o "APT::Sandbox::User=root"
-	)
 	log "downloading busybox-static:armhf with a private apt configuration"
-	apt-get "${apt_opts[@]}" -qq update
-	(cd "$bbdir" && apt-get "${apt_opts[@]}" -qq download busybox-static:armhf)
+	apt-get "${PRIVATE_APT_OPTS[@]}" -qq update
+	(cd "$bbdir" && apt-get "${PRIVATE_APT_OPTS[@]}" -qq download busybox-static:armhf)
 	deb=$(ls "$bbdir"/busybox-static_*_armhf.deb | tail -1)
 	rm -rf "$apt_root"
 fi

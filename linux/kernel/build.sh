@@ -128,26 +128,15 @@ rt_series() {
 		suites=$(debian_suites) || die "cannot find the Debian suites in /etc/apt"
 		tmp=$(mktemp -d "$root/fetch.XXXXXX")
 		apt_root=$tmp/apt
-		mkdir -p "$apt_root/lists/partial" "$apt_root/cache/archives/partial" "$apt_root/etc/preferences.d"
+		private_apt_setup "$apt_root"
 		for s in $suites; do
 			echo "deb-src $mirror $s main"
 		done >"$apt_root/etc/sources.list"
-		: >"$apt_root/status"
-		local apt_opts=(
-			-o "Dir::Etc::SourceList=$apt_root/etc/sources.list"
-			-o "Dir::Etc::SourceParts=-"
-			-o "Dir::Etc::PreferencesParts=$apt_root/etc/preferences.d"
-			-o "Dir::State::Lists=$apt_root/lists"
-			-o "Dir::State::Status=$apt_root/status"
-			-o "Dir::Cache=$apt_root/cache"
-			-o "Debug::NoLocking=1"
-			-o "APT::Sandbox::User=root"
-		)
 		log "fetching the PREEMPT_RT series: deb-src lines for $suites (private apt configuration)"
-		apt-get "${apt_opts[@]}" -qq update ||
+		apt-get "${PRIVATE_APT_OPTS[@]}" -qq update ||
 			die "apt-get update with the private deb-src configuration failed"
 		# the candidate is the newest version these suites serve
-		(cd "$tmp" && apt-get "${apt_opts[@]}" -qq source --download-only --diff-only linux \
+		(cd "$tmp" && apt-get "${PRIVATE_APT_OPTS[@]}" -qq source --download-only --diff-only linux \
 			>"$tmp/source.log" 2>&1) ||
 			{ cat "$tmp/source.log" >&2; die "apt-get source --diff-only linux failed"; }
 		diff=$(ls "$tmp"/linux_*.debian.tar.xz 2>/dev/null | head -1)

@@ -2,7 +2,7 @@
 # debian_mirror: print the Debian mirror URI this machine's apt already uses
 # (from /etc/apt/sources.list.d/*.sources or /etc/apt/sources.list), so that
 # no registry host name is ever written into the repository. Sourced by
-# scripts/bootstrap.sh and linux/initramfs/build.sh.
+# scripts/bootstrap.sh, linux/initramfs/build.sh and build-rt-tests.sh, linux/kernel/build.sh.
 debian_mirror() {
 	local f uri=""
 	for f in /etc/apt/sources.list.d/*.sources; do
@@ -18,4 +18,28 @@ debian_mirror() {
 		return 1
 	fi
 	printf '%s\n' "${uri%/}"
+}
+
+# private_apt_setup ROOT [OPTION...]: a private apt configuration under ROOT:
+# its own sources list (ROOT/etc/sources.list, which the caller writes),
+# state, lists and cache; the machine's sources.list.d and preferences are
+# not read. Sets the array PRIVATE_APT_OPTS for apt-get, the OPTIONs
+# (-o ... pairs) appended. Sourced by linux/initramfs/build.sh and
+# build-rt-tests.sh.
+private_apt_setup() {
+	local root=$1
+	shift
+	mkdir -p "$root/lists/partial" "$root/cache/archives/partial" "$root/etc/preferences.d"
+	: >"$root/status"
+	PRIVATE_APT_OPTS=(
+		-o "Dir::Etc::SourceList=$root/etc/sources.list"
+		-o "Dir::Etc::SourceParts=-"
+		-o "Dir::Etc::PreferencesParts=$root/etc/preferences.d"
+		-o "Dir::State::Lists=$root/lists"
+		-o "Dir::State::Status=$root/status"
+		-o "Dir::Cache=$root/cache"
+		-o "Debug::NoLocking=1"
+		-o "APT::Sandbox::User=root"
+		"$@"
+	)
 }
