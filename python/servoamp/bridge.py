@@ -88,6 +88,9 @@ TOPICS = sorted(list(CHANNELS) + [T_LOG])
 
 T_CAN = "/servoamp/can{bus}"   # one per CAN bus: CanFrame
 TIME_STAMP_ID = 0x1FF           # the master's time stamp PDO (canopen_master.h CO_COB_TIME_STAMP)
+# a CYCLE payload's fixed fields (cycle, t_ns, servo_cycle, t_cycle, irq
+# latency, wake-up latency, exchange, ...): the records of any axis count
+_CYCLE_HEAD = tw.cycle_struct(0)
 # frames held while the clock offset is not known yet (the first cycles)
 CAN_PENDING_MAX = 1 << 17
 
@@ -365,7 +368,7 @@ class Bridge:
                     break
                 if rec.type != canlink.FRAME:
                     continue
-                data = rec.data[:rec.dlc] if not rec.rtr else b""
+                data = rec.data     # exactly dlc bytes, none for a remote frame
                 bits = canlink.frame_bits(rec.can_id, rec.eff, rec.rtr, rec.dlc, data)
                 msg = pb.CanFrame(bus=bus, t_bus_ns=rec.t_ns, id=rec.can_id, extended=rec.eff,
                                   remote=rec.rtr, dlc=rec.dlc, data=data, bits=bits,
@@ -397,11 +400,9 @@ class Bridge:
 
     def _clock_sample(self, buf: bytearray, off: int) -> None:
         """A cycle record for the CAN frames' clock (fresh exchanges only)."""
-        lat, exch = struct.unpack_from("<II", buf, off + 28)
+        _cyc, t_ns, _sc, t_cycle, _irq, lat, exch = _CYCLE_HEAD.unpack_from(buf, off)[:7]
         if exch != 0:
             return
-        t_ns, = struct.unpack_from("<Q", buf, off + 8)
-        t_cycle, = struct.unpack_from("<I", buf, off + 20)
         hz = self.hello.clock_hz if self.hello is not None else 0
         with self._can_lock:
             if self.clock.add_cycle(t_ns, lat, t_cycle, hz):

@@ -101,8 +101,8 @@ class ControllerBoard:
         self.token = secrets.token_hex(16)  # servod's --telemetry-token, per boot
         # CAN (docs/canlink.md, docs/fieldbus.md): bus (0: CAN0, 1: CAN1) ->
         # the drive simulator's --nodes on it; each bus linked in lockstep to
-        # its own servoamp-drivesim, and with can_log (a directory) a passive
-        # python-can logger per bus writing can_log/canN.asc (every frame on
+        # its own servoamp-drivesim, and with can_log (a directory) an active
+        # python-can logger (it only sends DONEs: QEMU waits for it) per bus writing can_log/canN.asc (every frame on
         # the bus, whole once QEMU has quit)
         self.can_drives = dict(can_drives or {})
         self.can_log = can_log
@@ -184,7 +184,7 @@ class ControllerBoard:
         return ans
 
     def can_log_path(self, bus: int) -> Path:
-        """The passive logger's ASC file of a bus (can_log: its directory)."""
+        """The logger's ASC file of a bus (can_log: its directory)."""
         assert self.can_log is not None
         return self.can_log / f"can{bus}.asc"
 

@@ -4,8 +4,8 @@ QEMU boot on virtual time.
 The board runs Linux, servod and the servo firmware built for
 boards/zynq7000_qemu/servo-can.dts (rpu_app-can.elf: its four axes on CAN
 drives, nodes 1 and 2 on each of the two buses). Each bus is linked in
-lockstep to its own drive simulator (servoamp-drivesim) and to a passive
-python-can logger (can.logger, ASC) through QEMU's can-host-lockstep
+lockstep to its own drive simulator (servoamp-drivesim) and to a
+python-can logger (can.logger, ASC; active, so QEMU waits for it) through QEMU's can-host-lockstep
 backend (docs/canlink.md, docs/fieldbus.md). The servo core is the CANopen
 master; Linux sees the drives only through the feedback records:
 
@@ -25,9 +25,10 @@ master; Linux sees the drives only through the feedback records:
 
 from __future__ import annotations
 
+import bisect
+import functools
 import json
 import os
-import bisect
 import re
 import statistics
 import subprocess
@@ -288,11 +289,16 @@ def test_loggers_hold_every_frame(run: dict[str, Any]) -> None:
             sorted(set(g for g in gaps if abs(g - PERIOD_NS) >= PERIOD_NS // 4))[:10]
 
 
-def _mcap(path: Path) -> tuple[dict[int, list[tuple[int, int, Any]]], list[tuple[int, int]]]:
-    """The bridge's recording: per bus (log time, t_bus_ns, CanFrame), and
-    the cycle interrupts in the controller's clock (t_ns - wake-up latency)."""
+@functools.lru_cache(maxsize=1)
+def _mcap(path: Path) -> tuple[dict[int, list[tuple[int, int, Any]]], list[tuple[int, int]],
+                               dict[tuple[int, int], int]]:
+    """The bridge's recording, read once: per bus (log time, t_bus_ns,
+    CanFrame); the cycle interrupts in the controller's clock (t_ns -
+    wake-up latency); and per (axis, drive error code) the log time of the
+    first cycle record carrying it."""
     frames: dict[int, list[tuple[int, int, Any]]] = {}
     events: list[tuple[int, int]] = []
+    first_code: dict[tuple[int, int], int] = {}
     with open(path, "rb") as f:
         for _sch, ch, msg in make_reader(f).iter_messages():
             if ch.topic.startswith("/servoamp/can"):
@@ -301,13 +307,17 @@ def _mcap(path: Path) -> tuple[dict[int, list[tuple[int, int, Any]]], list[tuple
             elif ch.topic == "/servoamp/cycle":
                 c = pb.Cycle.FromString(msg.data)
                 events.append((msg.log_time - c.wake_latency_ns, c.cycle))
-    return frames, sorted(events)
+                for i, ax in enumerate(c.axes):
+                    code = ax.feedback.status_word >> 16
+                    if code:
+                        first_code.setdefault((i, code), msg.log_time)
+    return frames, sorted(events), first_code
 
 
 def test_the_bridge_records_every_frame(run: dict[str, Any]) -> None:
     br = run["bridge"]
     assert not br["errors"] and br["record_error"] is None, br
-    frames, events = _mcap(run["mcap"])
+    frames, _events, _codes = _mcap(run["mcap"])
     assert set(frames) == set(DRIVES), (set(frames), br)
     for bus, rec in frames.items():
         assert len(rec) == br["frames"][bus]
@@ -345,16 +355,9 @@ def test_the_frames_sit_in_their_cycles(run: dict[str, Any]) -> None:
     bound plus the exchange to Linux: cause and effect in order on one
     time line (an offset wrong by a cycle or more breaks it). And every
     SYNC falls inside a cycle of servod's, after its interrupt."""
-    frames, events = _mcap(run["mcap"])
+    frames, events, first_code = _mcap(run["mcap"])
     ev = [t for t, _c in events]
     assert len(ev) > SYNC_CYCLES
-    first_code: dict[tuple[int, int], int] = {}
-    with open(run["mcap"], "rb") as f:
-        for _sch, _ch, msg in make_reader(f).iter_messages(topics=["/servoamp/cycle"]):
-            for i, ax in enumerate(pb.Cycle.FromString(msg.data).axes):
-                code = ax.feedback.status_word >> 16
-                if code:
-                    first_code.setdefault((i, code), msg.log_time)
     seen = 0
     for axis, (b, node, kind, code) in FAULTS.items():
         if kind == "off-bus":
