@@ -133,6 +133,9 @@ static void put_linux(struct out *o, const struct cycle_stats *c, const struct a
 	    (unsigned long long)(c->lat_n ? c->lat_sum / c->lat_n : 0), c->lat_max);
 	put(o, "linux.work_ns.mean=%llu\nlinux.work_ns.max=%u\n",
 	    (unsigned long long)(c->cycles ? c->work_sum / c->cycles : 0), c->work_max);
+	/* the sum too: a window's exact mean is the difference of two sums
+	 * over that of linux.cycles (bench/cycle/cycle_bench.py) */
+	put(o, "linux.work_ns.sum=%llu\n", (unsigned long long)c->work_sum);
 	for (int b = 0; b < LAT_BUCKETS; b++) {
 		if (b < LAT_BUCKETS - 1)
 			put(o, "linux.wake_lat_hist.lt_%uus=%llu\n", lat_bucket_edges_us[b],

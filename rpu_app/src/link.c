@@ -95,13 +95,21 @@ static uint32_t next_try, stack_pending, irq_abort_pending;
 static int last_err;
 static struct amp_fb_axis fb[AMP_MAX_AXES];
 
-/* Costs (global-timer ticks), written by the cycle handler. */
+/*
+ * Costs (global-timer ticks), written by the cycle handler. They describe
+ * the configuration in force: a change of the axis count or of the cycle
+ * period starts them again (param_applied), so that one boot can measure
+ * the cost of each configuration (bench/cycle/cycle_bench.py sweeps 1..8
+ * axes at several rates). worst_ticks is never restarted: it is the worst
+ * handler cost since the start, which check_load holds a new period to.
+ */
 static struct {
 	uint32_t n;
 	uint32_t rx_max, ctrl_max, tx_max, cyc_max;
 	uint64_t rx_sum, ctrl_sum, tx_sum, cyc_sum;
 	uint32_t lat_max_ns;
 } cost;
+static uint32_t worst_ticks;
 
 static uint32_t period_refused;	/* cycle_period_us values refused (check_load) */
 
@@ -118,6 +126,7 @@ void link_init(void)
 	last_err = 1;	/* nothing reported yet */
 	amp = (struct amp_servo){ 0 };
 	cost = (__typeof__(cost)){ 0 };
+	worst_ticks = 0;
 	link_diag = (struct link_diag){ 0 };
 	link_debug = (struct link_debug){ 0 };
 	period_refused = 0;
@@ -220,6 +229,8 @@ void link_cycle(uint32_t t_entry, uint32_t lat_ns)
 		cost.tx_max = t3 - t1 - t2;
 	if (t3 > cost.cyc_max)
 		cost.cyc_max = t3;
+	if (t3 > worst_ticks)
+		worst_ticks = t3;
 	if (lat_ns > cost.lat_max_ns && lat_ns != 0xffffffffu)
 		cost.lat_max_ns = lat_ns;
 }
@@ -244,7 +255,7 @@ static uint32_t mean(uint64_t sum, uint32_t n)
  */
 static int32_t check_load(uint32_t id, uint32_t v)
 {
-	uint32_t worst_ns = cost.cyc_max * (1000u / AMP_BOARD_TICKS_PER_US);
+	uint32_t worst_ns = worst_ticks * (1000u / AMP_BOARD_TICKS_PER_US);
 
 	if (id != SP_P_cycle_period_us || v == app_param(id) || sp_period_fits(v, worst_ns))
 		return SP_OK;
@@ -253,6 +264,23 @@ static int32_t check_load(uint32_t id, uint32_t v)
 		   (unsigned)v, (unsigned)worst_ns, (unsigned)SP_PERIOD_MARGIN_NUM,
 		   (unsigned)SP_PERIOD_MARGIN_DEN);
 	return SP_E_OVERLOAD;
+}
+
+/*
+ * A parameter applied (app_param_apply); a new axis count or cycle period
+ * starts the cost figures again (the cycle handler updates them: masked).
+ */
+static void param_applied(uint32_t id, uint32_t old)
+{
+	uint32_t flags;
+
+	if (id == SP_P_wd_limit)
+		amp.wd.limit = app_param(id);
+	if ((id != SP_P_axes && id != SP_P_cycle_period_us) || app_param(id) == old)
+		return;
+	flags = irq_save();
+	cost = (__typeof__(cost)){ 0 };
+	irq_restore(flags);
 }
 
 /* Serve one request; returns the status, fills out/len. */
@@ -283,7 +311,7 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 		return SP_OK;
 	}
 	case SP_CMD_PARAM_SET: {
-		uint32_t id, v;
+		uint32_t id, v, old;
 		int32_t rc;
 
 		if (nw != 2u)
@@ -295,9 +323,9 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 			rc = check_load(id, v);
 		if (rc != SP_OK)
 			return rc;
+		old = app_param(id);
 		app_param_apply(id, v);
-		if (id == SP_P_wd_limit)
-			amp.wd.limit = v;
+		param_applied(id, old);
 		out[0] = id;
 		out[1] = app_param(id);
 		if (bad_answer) {	/* debug: an answer servod must refuse */
@@ -329,9 +357,10 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 				return rc;
 		}
 		for (uint32_t i = 0; i < cnt; i++) {
+			uint32_t old = app_param(ids[i]);
+
 			app_param_apply(ids[i], vals[i]);
-			if (ids[i] == SP_P_wd_limit)
-				amp.wd.limit = vals[i];
+			param_applied(ids[i], old);
 		}
 		out[0] = cnt;
 		*len = 4;
