@@ -4,6 +4,8 @@
 
     .venv/bin/python bench/cycle/cycle_bench.py [--seconds 10] [--short 3]
         [--modes virtual,host-single,host-multi] [--json bench/results/cycle.json]
+        [--sweep-axes 1-8] [--sweep-rates 1000,2000,4000,8000] [--fit-rates 1000,4000]
+        [--window-cycles 2000] [--long-cycles 100000] [--long-rate 4000] [--long-axes 8]
 
 Modes: ``virtual`` (the default: -icount, guest time counts instructions,
 single-threaded TCG; every figure is in guest ns, independent of host
@@ -11,14 +13,37 @@ load), ``host-single`` and ``host-multi`` (guest time on the host clock,
 single- or multi-threaded TCG: figures depend on the host's load).
 
 Boots zynq7000_qemu, starts servod, then rpu_app through remoteproc, and
-runs the exchange for --seconds at 1 ms and --short at 250 us. Prints and
-stores, per period: cycles and missed cycles on each side, exchange
-counters, the per-cycle cost of the exchange on each side (servo: A9
-global-timer ticks of 10 ns from the cycle handler's entry to commands
+runs the exchange for --seconds at 1 ms and --short at 250 us (4 axes).
+Prints and stores, per period: cycles and missed cycles on each side,
+exchange counters, the per-cycle cost of the exchange on each side (servo:
+A9 global-timer ticks of 10 ns from the cycle handler's entry to commands
 consumed / control / feedback published; Linux: wake-up to commands
 published, CLOCK_MONOTONIC), the servo's interrupt entry latency and
 servod's wake-up latency histogram (interrupt event to servod running,
 read from its own TTC counter).
+
+Then, in the same boot and in ``virtual`` mode only (issue 24, items 2
+and 3):
+
+- **the sweep**: for each axis count of --sweep-axes (``ampctl param set
+  axes N``) and each rate of --sweep-rates (``cycle_period_us``), a window
+  of --window-cycles cycles: missed cycles on both sides, the servo's cost
+  per stage (the firmware starts its cost figures again at every change
+  of the axis count or the period, so each point has its own) and Linux's
+  work (wake-up to commands published: the window's exact mean from
+  servod's ``linux.work_ns.sum``). From the points at each of --fit-rates
+  a least-squares line over the axis count: instructions per axis (slope)
+  and per cycle (intercept), servo and Linux. The rate table: per axis
+  count, the highest rate with 0 missed on both sides at it and at every
+  lower rate tried.
+- **the long run**: --long-cycles cycles at --long-rate with --long-axes
+  axes, 0 missed on both sides expected (issue 24: 100,000 at 4 kHz).
+
+Under -icount shift=0 one guest instruction is 1 ns of guest time, so the
+servo's 10 ns ticks x 10 are instructions. Both cores share that one
+instruction clock (single-threaded TCG runs them in turn): Linux's work in
+ns counts CPU0's instructions as long as CPU1 sleeps in wfi meanwhile,
+which it does in Linux's half of the cycle (docs/cycle.md, section 7).
 
 QEMU is not cycle-accurate: these figures describe the emulator on this
 host (TCG, shared machine), not a Zynq-7000.
@@ -61,7 +86,7 @@ def window(console: qemu.Uart, prompt: str, seconds: float) -> dict[str, object]
     qemu.run_shell(console, f"sleep {seconds}", prompt, timeout=seconds * 10 + 30)
     host = time.monotonic() - t0
     b = stats(console, prompt)
-    d = {}
+    d: dict[str, Any] = {}
     for k, v in b.items():
         try:
             d[k] = int(v, 0) - int(a.get(k, "0"), 0) if not k.startswith(("linux.wake_lat_ns", "linux.work_ns", "servo.")) or k in (
@@ -96,25 +121,169 @@ def window(console: qemu.Uart, prompt: str, seconds: float) -> dict[str, object]
     return res
 
 
+SETTLE_S = 0.2     # after a change of axes or period, before a window opens
+
+
+def point(console: qemu.Uart, prompt: str, axes: int, rate_hz: int, cycles: int) -> dict[str, Any]:
+    """One point of the sweep: axes and rate set, then a window of cycles.
+    Counters are the window's (differences of two ``ampctl stats``); the
+    servo's costs are since the change (the firmware starts them again
+    when the axis count or the period changes); Linux's work is the
+    window's exact mean (difference of servod's sums)."""
+    period_us = round(1e6 / rate_hz)
+    res: dict[str, Any] = {"axes": axes, "rate_hz": rate_hz, "period_us": period_us, "cycles_asked": cycles}
+    rc, out = qemu.run_shell(console, f"ampctl param set axes {axes} 2>&1", prompt, timeout=30)
+    if rc:
+        raise RuntimeError(f"ampctl param set axes {axes} failed ({rc}):\n{out}")
+    rc, out = qemu.run_shell(console, f"ampctl param set cycle_period_us {period_us} 2>&1", prompt, timeout=30)
+    if rc:
+        # the firmware refuses a period its worst measured handler cost
+        # does not fit (SP_E_OVERLOAD, exit 6): a point not sustained
+        res["refused"] = out.strip().splitlines()[-1] if out.strip() else f"exit {rc}"
+        return res
+    qemu.run_shell(console, f"sleep {SETTLE_S}", prompt, timeout=60)
+    a = stats(console, prompt)
+    seconds = (cycles + 2) / rate_hz
+    qemu.run_shell(console, f"sleep {seconds:.4f}", prompt, timeout=seconds * 20 + 60)
+    b = stats(console, prompt)
+
+    def d(k: str) -> int:
+        return int(b[k], 0) - int(a[k], 0)
+
+    lin = d("linux.cycles")
+    res.update({
+        "linux": {"cycles": lin, "missed": d("linux.missed_irq"), "late": d("linux.late"),
+                  "fb_torn": d("linux.fb_torn"), "fb_invalid": d("linux.fb_invalid"),
+                  "fb_stale": d("linux.fb_stale"),
+                  "work_ns_mean": round(d("linux.work_ns.sum") / max(1, lin), 1),
+                  "wake_latency_histogram": {k.split(".", 2)[2]: d(k) for k in b
+                                             if k.startswith("linux.wake_lat_hist.")}},
+        "servo": {"cycles": d("servo.cycles"), "missed": d("servo.missed"),
+                  "cmd_torn": d("servo.cmd_torn"), "cmd_invalid": d("servo.cmd_invalid"),
+                  "cmd_stale": d("servo.cmd_stale"), "axes": int(b["servo.axes"], 0),
+                  "period_us": int(b["servo.period_us"], 0),
+                  "cost_samples": int(b["servo.cost_samples"], 0),
+                  # instructions (10 ns ticks x 10), since the change
+                  "instructions": {p: {"mean": int(b[f"servo.{p}_ticks.mean"], 0) * 10,
+                                       "max": int(b[f"servo.{p}_ticks.max"], 0) * 10}
+                                   for p in ("rx", "ctrl", "tx", "cycle")},
+                  "irq_entry_latency_ns_max": int(b["servo.irq_lat_ns.max"], 0)},
+    })
+    res["ok"] = res["linux"]["missed"] == 0 and res["servo"]["missed"] == 0
+    return res
+
+
+def fit(xs: list[float], ys: list[float]) -> dict[str, float]:
+    """Least-squares line y = slope * x + intercept, and its largest residual."""
+    n = len(xs)
+    if n < 2:
+        raise ValueError("a line needs two points")
+    mx, my = sum(xs) / n, sum(ys) / n
+    sxx = sum((x - mx) ** 2 for x in xs)
+    slope = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
+    icpt = my - slope * mx
+    return {"slope": round(slope, 1), "intercept": round(icpt, 1),
+            "max_residual": round(max(abs(y - (slope * x + icpt)) for x, y in zip(xs, ys)), 1), "points": n}
+
+
+def fits(points: list[dict[str, Any]], rate_hz: int) -> dict[str, Any]:
+    """Per axis, per cycle: the servo's stages (instructions) and Linux's
+    work (ns: instructions, docstring) over the axis count at one rate."""
+    pts = sorted((p for p in points if p["rate_hz"] == rate_hz and "servo" in p), key=lambda p: p["axes"])
+    if len(pts) < 2:
+        return {}
+    xs = [float(p["axes"]) for p in pts]
+    out: dict[str, Any] = {f"servo_{st}": fit(xs, [float(p["servo"]["instructions"][st]["mean"]) for p in pts])
+                           for st in ("rx", "ctrl", "tx", "cycle")}
+    out["servo_rx_tx"] = fit(xs, [float(p["servo"]["instructions"]["rx"]["mean"]
+                                        + p["servo"]["instructions"]["tx"]["mean"]) for p in pts])
+    out["linux_work_ns"] = fit(xs, [float(p["linux"]["work_ns_mean"]) for p in pts])
+    out["axes"] = [p["axes"] for p in pts]
+    return out
+
+
+def rate_table(points: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per axis count: the highest rate sustained with 0 missed on both
+    sides, at it and at every lower rate tried (0: not even the lowest)."""
+    out: dict[str, Any] = {}
+    for n in sorted({p["axes"] for p in points}):
+        best = 0
+        for p in sorted((p for p in points if p["axes"] == n), key=lambda p: p["rate_hz"]):
+            if not p.get("ok"):
+                break
+            best = p["rate_hz"]
+        out[str(n)] = best
+    return out
+
+
+def sweep(console: qemu.Uart, prompt: str, axes: list[int], rates: list[int], cycles: int) -> list[dict[str, Any]]:
+    pts = []
+    for n in axes:
+        for r in sorted(rates):
+            p = point(console, prompt, n, r, cycles)
+            pts.append(p)
+            if "refused" in p:
+                print(f"[sweep {n} axes {r / 1000:g} kHz] refused: {p['refused']}", flush=True)
+                continue
+            lin, srv = p["linux"], p["servo"]
+            ins = srv["instructions"]
+            print(f"[sweep {n} axes {r / 1000:g} kHz] linux {lin['cycles']} cycles, missed {lin['missed']}, "
+                  f"late {lin['late']}, work {lin['work_ns_mean']} ns; servo {srv['cycles']} cycles, missed "
+                  f"{srv['missed']}; instructions mean rx {ins['rx']['mean']} ctrl {ins['ctrl']['mean']} "
+                  f"tx {ins['tx']['mean']} cycle {ins['cycle']['mean']} (max {ins['cycle']['max']})", flush=True)
+    return pts
+
+
+def start_cycle(m: qemu.QemuMachine, prompt: str) -> qemu.Uart:
+    """Boot to the shell, servod, the firmware through remoteproc, the
+    exchange running (watchdog 50 cycles, as the suite has it)."""
+    qemu.boot_to_shell(m, timeout=90)
+    c = m.uart(0)
+
+    def sh(cmd: str) -> None:
+        qemu.run_shell(c, cmd, prompt, timeout=60.0)
+
+    sh("dmesg -n 1")
+    sh("(servod > /tmp/servod.log 2>&1 &)")
+    sh("while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done")
+    sh("echo rpu_app.elf > /sys/class/remoteproc/remoteproc0/firmware; echo start > /sys/class/remoteproc/remoteproc0/state")
+    sh("while ! grep -q 'parameter set loaded' /tmp/servod.log; do sleep 0.05; done")
+    sh("ampctl param set wd_limit 50; ampctl resume; true")
+    return c
+
+
 def run_mode(board: qemu.Board, images: qemu.Images, clock: str, accel: str | None, seconds: float,
-             short: float) -> dict[str, object]:
+             short: float, sw: argparse.Namespace | None = None) -> dict[str, object]:
+    """One boot: the 1 ms and 250 us windows (4 axes); with sw (virtual
+    time only) the sweep and the long run after them."""
     prompt = str(board.data["linux"]["prompt"])
     m = qemu.QemuMachine(board, images, accel=accel, clock=clock)
     with m:
-        qemu.boot_to_shell(m, timeout=90)
-        c = m.uart(0)
-        sh = lambda cmd, t=60.0: qemu.run_shell(c, cmd, prompt, timeout=t)  # noqa: E731
-        sh("dmesg -n 1")
-        sh("(servod > /tmp/servod.log 2>&1 &)")
-        sh("while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done")
-        sh("echo rpu_app.elf > /sys/class/remoteproc/remoteproc0/firmware; echo start > /sys/class/remoteproc/remoteproc0/state")
-        sh("while ! grep -q 'parameter set loaded' /tmp/servod.log; do sleep 0.05; done")
-        sh("ampctl param set wd_limit 50; ampctl resume; true")
+        c = start_cycle(m, prompt)
+
+        def sh(cmd: str) -> None:
+            qemu.run_shell(c, cmd, prompt, timeout=60.0)
+
         out: dict[str, object] = {}
-        out["1000us"] = window(c, prompt, seconds)
-        sh("ampctl param set cycle_period_us 250; sleep 0.2")
-        out["250us"] = window(c, prompt, short)
-        sh("ampctl param set cycle_period_us 1000")
+        if seconds > 0:
+            out["1000us"] = window(c, prompt, seconds)
+        if short > 0:
+            sh("ampctl param set cycle_period_us 250; sleep 0.2")
+            out["250us"] = window(c, prompt, short)
+            sh("ampctl param set cycle_period_us 1000")
+        if sw is not None and sw.sweep_axes:
+            t0 = time.monotonic()
+            pts = sweep(c, prompt, sw.sweep_axes, sw.sweep_rates, sw.window_cycles)
+            out["sweep"] = {"window_cycles": sw.window_cycles, "settle_s": SETTLE_S,
+                            "host_seconds": round(time.monotonic() - t0, 1), "points": pts,
+                            "fits": {f"{r}hz": fits(pts, r) for r in sw.fit_rates},
+                            "max_rate_hz": rate_table(pts)}
+        if sw is not None and sw.long_cycles:
+            t0 = time.monotonic()
+            p = point(c, prompt, sw.long_axes, sw.long_rate, sw.long_cycles)
+            p["host_seconds"] = round(time.monotonic() - t0, 1)
+            out["long"] = p
+        sh("ampctl param set axes 4; ampctl param set cycle_period_us 1000")
         return out
 
 
@@ -132,8 +301,9 @@ def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
     """The summary table's figures (bench/README.md); targets in bench/targets.toml."""
     out: list[dict[str, Any]] = []
     for mode, m in result["modes"].items():
+        out += sweep_figures(m)
         for per, w in m.items():
-            if not isinstance(w, dict) or "linux" not in w:
+            if not isinstance(w, dict) or "linux" not in w or per == "long":
                 continue
             lin, srv = w["linux"], w["servo"]
             k = f"{mode}_{per}"
@@ -144,7 +314,7 @@ def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
                  "note": f"of {srv['cycles'] + srv['missed']}"},
                 {"name": f"{k}_servo_irq_latency_max", "unit": "us", "better": "lower",
                  "value": round(srv["irq_entry_latency_ns_max_since_start"] / 1000, 2),
-                 "note": "TTC event -> servo handler, since start"},
+                 "note": "TTC event -> servo handler, max since the start or the last change of axes or period"},
                 {"name": f"{k}_servod_wake_latency_max", "unit": "us", "better": "lower",
                  "value": round(lin["wake_latency_ns_since_start"]["max"] / 1000, 2),
                  "note": f"mean {lin['wake_latency_ns_since_start']['mean'] / 1000:.1f} us"},
@@ -159,12 +329,125 @@ def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
                 for stage in ("rx", "ctrl", "tx", "cycle"):
                     out.append({"name": f"{k}_servo_{stage}_instructions", "unit": "instr",
                                 "better": "lower", "value": cost[stage]["mean"] * 10,
-                                "note": f"mean; max {cost[stage]['max'] * 10} since start"})
+                                "note": f"mean; max {cost[stage]['max'] * 10} since the start or the last "
+                                        "change of axes or period"})
                 axes = srv.get("axes") or 1
                 out.append({"name": f"{k}_servo_ctrl_instructions_per_axis", "unit": "instr",
                             "better": "lower", "value": round(cost["ctrl"]["mean"] * 10 / axes),
                             "note": f"ctrl mean / {axes} axes (4 sub-steps each): an upper bound "
                                     "on the per-axis slope"})
+    return out
+
+
+def sweep_figures(m: dict[str, Any]) -> list[dict[str, Any]]:
+    """The sweep's and the long run's figures (issue 24, items 2 and 3)."""
+    out: list[dict[str, Any]] = []
+    sw = m.get("sweep")
+    if sw:
+        for key, f in sw["fits"].items():
+            if not f:
+                continue
+            k = f"fit_{int(key[:-2]) / 1000:g}khz"
+            ax = f"axes {f['axes'][0]}..{f['axes'][-1]}, {len(f['axes'])} windows of {sw['window_cycles']} cycles"
+            for st, what in (("cycle", "the whole handler"), ("ctrl", "control, 4 sub-steps")):
+                out.append({"name": f"{k}_servo_{st}_instructions_per_axis", "unit": "instr", "better": "lower",
+                            "value": f[f"servo_{st}"]["slope"],
+                            "note": f"{what}: least-squares slope over {ax}; intercept "
+                                    f"{f[f'servo_{st}']['intercept']:g}, max residual {f[f'servo_{st}']['max_residual']:g}"})
+            out.append({"name": f"{k}_servo_cycle_instructions_intercept", "unit": "instr", "better": "lower",
+                        "value": f["servo_cycle"]["intercept"], "note": "the whole handler, per cycle, at 0 axes (fit)"})
+            rxtx = f["servo_rx_tx"]
+            out.append({"name": f"{k}_servo_rx_tx_instructions_per_axis", "unit": "instr", "better": "lower",
+                        "value": rxtx["slope"], "note": f"amp_lib rx + tx: intercept {rxtx['intercept']:g}"})
+            lw = f["linux_work_ns"]
+            out.append({"name": f"{k}_linux_work_ns_per_axis", "unit": "ns", "better": "lower",
+                        "value": lw["slope"], "note": f"servod wake-up -> commands published, slope over {ax}; "
+                                                      f"max residual {lw['max_residual']:g}"})
+            out.append({"name": f"{k}_linux_work_ns_intercept", "unit": "ns", "better": "lower",
+                        "value": lw["intercept"], "note": "servod wake-up -> commands published, at 0 axes (fit)"})
+        most = max(p["axes"] for p in sw["points"])
+        for p in sw["points"]:
+            if p["axes"] != most or "servo" not in p or p["rate_hz"] not in (1000, 4000):
+                continue
+            k = f"sweep_{p['rate_hz'] / 1000:g}khz_{most}axes"
+            ins = p["servo"]["instructions"]
+            out.append({"name": f"{k}_servo_rx_tx_instructions", "unit": "instr", "better": "lower",
+                        "value": ins["rx"]["mean"] + ins["tx"]["mean"],
+                        "note": f"amp_lib on the servo: entry -> commands consumed {ins['rx']['mean']} + "
+                                f"feedback published {ins['tx']['mean']}, means"})
+            out.append({"name": f"{k}_servo_rx_instructions", "unit": "instr", "better": "lower",
+                        "value": ins["rx"]["mean"],
+                        "note": f"cycle handler entry -> commands consumed, mean; max {ins['rx']['max']}"})
+        for n, r in sw["max_rate_hz"].items():
+            tried = sorted(p["rate_hz"] for p in sw["points"] if p["axes"] == int(n))
+            bad = [f"{p['rate_hz'] / 1000:g} kHz: " + (p["refused"] if "refused" in p else
+                   f"missed {p['linux']['missed']}/{p['servo']['missed']}")
+                   for p in sw["points"] if p["axes"] == int(n) and not p.get("ok")]
+            out.append({"name": f"max_rate_khz_{n}axes", "unit": "kHz", "better": "higher", "value": r / 1000,
+                        "note": f"0 missed both sides in {sw['window_cycles']} cycles; tried "
+                                f"{', '.join(f'{t / 1000:g}' for t in tried)} kHz"
+                                + (f"; {'; '.join(bad)}" if bad else "")})
+    lg = m.get("long")
+    if lg:
+        k = f"long_{lg['rate_hz'] / 1000:g}khz_{lg['axes']}axes"
+        if "refused" in lg:
+            out.append({"name": f"{k}_refused", "unit": "runs", "better": "lower", "value": 1, "note": lg["refused"]})
+        else:
+            out += [
+                {"name": f"{k}_missed_linux", "value": lg["linux"]["missed"], "unit": "cycles", "better": "lower",
+                 "note": f"of {lg['linux']['cycles'] + lg['linux']['missed']} ({lg['cycles_asked']} asked); "
+                         f"late {lg['linux']['late']}"},
+                {"name": f"{k}_missed_servo", "value": lg["servo"]["missed"], "unit": "cycles", "better": "lower",
+                 "note": f"of {lg['servo']['cycles'] + lg['servo']['missed']}"},
+                {"name": f"{k}_cycles", "value": min(lg["linux"]["cycles"], lg["servo"]["cycles"]),
+                 "unit": "cycles", "better": "higher",
+                 "note": f"cycles run on both sides (the lower of the two) with {lg['axes']} axes"},
+            ]
+    return out
+
+
+def print_sweep(r: dict[str, Any]) -> None:
+    """The fits, the rate table and the long run, as text."""
+    sw = r.get("sweep")
+    if sw:
+        for key, f in sw["fits"].items():
+            if not f:
+                continue
+            print(f"per axis at {int(key[:-2]) / 1000:g} kHz (least squares over axes {f['axes']}):")
+            for name, unit in (("servo_rx", "instr"), ("servo_ctrl", "instr"), ("servo_tx", "instr"),
+                               ("servo_cycle", "instr"), ("servo_rx_tx", "instr"), ("linux_work_ns", "ns")):
+                v = f[name]
+                print(f"    {name:14} {v['slope']:8.1f} {unit}/axis + {v['intercept']:8.1f} {unit} "
+                      f"(max residual {v['max_residual']:g})")
+        rates = sorted({p["rate_hz"] for p in sw["points"]})
+        print("highest rate with 0 missed (both sides), per axis count; missed linux/servo per rate:")
+        print("    axes  " + "  ".join(f"{x / 1000:>9g} kHz" for x in rates) + "   highest")
+        for n, best in sw["max_rate_hz"].items():
+            cells = []
+            for x in rates:
+                p = next((p for p in sw["points"] if p["axes"] == int(n) and p["rate_hz"] == x), None)
+                cells.append("-" if p is None else "refused" if "refused" in p
+                             else f"{p['linux']['missed']}/{p['servo']['missed']}")
+            print(f"    {n:>4}  " + "  ".join(f"{c:>13}" for c in cells) + f"   {best / 1000:g} kHz")
+    lg = r.get("long")
+    if lg:
+        if "refused" in lg:
+            print(f"long run: {lg['rate_hz']} Hz refused: {lg['refused']}")
+        else:
+            print(f"long run: {lg['axes']} axes at {lg['rate_hz'] / 1000:g} kHz, {lg['cycles_asked']} cycles asked: "
+                  f"linux {lg['linux']['cycles']} cycles, missed {lg['linux']['missed']}, late {lg['linux']['late']}; "
+                  f"servo {lg['servo']['cycles']} cycles, missed {lg['servo']['missed']}; "
+                  f"{lg['host_seconds']} s of host time")
+
+
+def axes_list(text: str) -> list[int]:
+    """'1-8' or '1,4,8' (or '' for none) -> [1, ..., 8], each within 1..8."""
+    out: list[int] = []
+    for part in filter(None, text.split(",")):
+        lo, _, hi = part.partition("-")
+        out += list(range(int(lo), int(hi or lo) + 1))
+    if any(not 1 <= n <= 8 for n in out):
+        raise argparse.ArgumentTypeError(f"axes {text!r}: each within 1..8 (AMP_MAX_AXES)")
     return out
 
 
@@ -174,7 +457,20 @@ def main() -> int:
     ap.add_argument("--short", type=float, default=3.0)
     ap.add_argument("--modes", default="virtual")
     ap.add_argument("--json", type=Path, default=REPO / "bench/results/cycle.json")
+    ap.add_argument("--sweep-axes", type=axes_list, default=list(range(1, 9)),
+                    help="axis counts of the sweep ('1-8', '1,4,8', '' for no sweep)")
+    ap.add_argument("--sweep-rates", type=lambda t: [int(x) for x in t.split(",")], default=[1000, 2000, 4000, 8000],
+                    help="cycle rates in Hz (periods 125..10000 us)")
+    ap.add_argument("--fit-rates", type=lambda t: [int(x) for x in t.split(",")], default=[1000, 4000],
+                    help="rates whose points give the per-axis fits")
+    ap.add_argument("--window-cycles", type=int, default=2000, help="cycles per sweep window")
+    ap.add_argument("--long-cycles", type=int, default=100_000, help="cycles of the long run (0: none)")
+    ap.add_argument("--long-rate", type=int, default=4000, help="Hz")
+    ap.add_argument("--long-axes", type=int, default=8, choices=range(1, 9))
     args = ap.parse_args()
+    for r in args.sweep_rates + [args.long_rate]:
+        if not 100 <= r <= 8000:
+            ap.error(f"rate {r} Hz: the period must be within 125..10000 us")
     board = qemu.Board.load("zynq7000_qemu")
     images = qemu.prepare_images(board)
     result: dict[str, object] = {
@@ -186,11 +482,13 @@ def main() -> int:
         if mode not in MODES:
             ap.error(f"--modes: {mode!r} is not one of {', '.join(MODES)}")
         clock, accel = MODES[mode]
-        r = run_mode(board, images, clock, accel, args.seconds, args.short)
+        r = run_mode(board, images, clock, accel, args.seconds, args.short, args if mode == "virtual" else None)
         result["modes"][mode] = {  # type: ignore[index]
             "clock": " ".join(qemu.clock_args(board, clock)) or "host",
             "accel": accel or "tcg (multi-threaded, default)", **r}
         for per, w in r.items():
+            if per in ("sweep", "long"):
+                continue
             lin, srv = w["linux"], w["servo"]  # type: ignore[index]
             print(f"[{mode:11} {per:>6}] linux cycles {lin['cycles']} missed {lin['missed']} ({lin['miss_rate_pct']} %), "
                   f"servo cycles {srv['cycles']} missed {srv['missed']} ({srv['miss_rate_pct']} %), "
@@ -203,6 +501,7 @@ def main() -> int:
             print(f"                servod: wake-up latency ns {lin['wake_latency_ns_since_start']}, "
                   f"work (wake->published) ns {lin['work_ns_wake_to_published']}")
             print(f"                servod wake-up histogram (window): {lin['wake_latency_histogram_window']}")
+        print_sweep(r)
     result["figures"] = figures(result)
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(result, indent=2) + "\n")
