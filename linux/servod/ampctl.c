@@ -7,7 +7,7 @@
  *   ampctl [-s SOCKET] param list
  *   ampctl [-s SOCKET] param get NAME|ID
  *   ampctl [-s SOCKET] param set NAME|ID VALUE
- *   ampctl [-s SOCKET] resume               leave SAFESTOP
+ *   ampctl [-s SOCKET] resume               leave SAFESTOP; acknowledge drive faults
  *   ampctl [-s SOCKET] fault                the recovery state and the fault latch
  *   ampctl [-s SOCKET] fault reset          reset a latched fault: the firmware restarted
  *   ampctl [-s SOCKET] debug hang|crash|fault|badparam|stack|overload|stray-irq|slow US  make the firmware fail (tests)

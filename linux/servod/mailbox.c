@@ -150,7 +150,7 @@ static int simple_command(struct servod *sd, struct out *o, const char *name, ui
 	return rc;
 }
 
-/* "resume": the servo leaves its safe stop. */
+/* "resume": the servo leaves its safe stop and acknowledges the drives' faults. */
 static int req_resume(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
 {
 	(void)argc;

@@ -366,15 +366,16 @@ class Bridge:
                     continue
                 if rec.type == canlink.BYE:
                     break
-                if rec.type != canlink.FRAME:
+                if rec.type not in (canlink.FRAME, canlink.ERROR):
                     continue
+                error = rec.type == canlink.ERROR       # a frame destroyed by a bus error
                 data = rec.data     # exactly dlc bytes, none for a remote frame
-                bits = canlink.frame_bits(rec.can_id, rec.eff, rec.rtr, rec.dlc, data)
+                bits = 0 if error else canlink.frame_bits(rec.can_id, rec.eff, rec.rtr, rec.dlc, data)
                 msg = pb.CanFrame(bus=bus, t_bus_ns=rec.t_ns, id=rec.can_id, extended=rec.eff,
                                   remote=rec.rtr, dlc=rec.dlc, data=data, bits=bits,
-                                  from_servo=not rec.info).SerializeToString()
+                                  from_servo=not rec.info, error=error).SerializeToString()
                 start = rec.t_ns - round(bits * bit_ns)
-                stamp = (not rec.info and not rec.eff and not rec.rtr and rec.dlc == 4
+                stamp = (not error and not rec.info and not rec.eff and not rec.rtr and rec.dlc == 4
                          and rec.can_id == TIME_STAMP_ID and start >= bus_free)
                 bus_free = max(bus_free, rec.t_ns)
                 with self._can_lock:

@@ -9,8 +9,10 @@ Every message both ways is one 32-byte little-endian record::
 
 A :class:`Link` connects to the Unix socket QEMU listens on, says HELLO
 (``active`` for a client that answers frames and holds the guest while it
-does), and then reads FRAME records; an active client answers a frame with
-its own FRAMEs and ends it with DONE(seq). Every record read is checked
+does; ``listen`` for one held like it that answers nothing and gets only the
+frames no client destroyed), and then reads FRAME records (and ERROR, for a
+frame destroyed by a bus error); an active client answers a frame with its
+own FRAMEs and ends it with DONE(seq), a listener with DONE alone. Every record read is checked
 (:func:`unpack`): an unknown type, a dlc over 8, an identifier over its range
 or nonzero reserved fields raise :class:`ProtocolError`.
 
@@ -31,13 +33,19 @@ HELLO = 1
 FRAME = 2
 DONE = 3
 BYE = 4
-TYPES = (HELLO, FRAME, DONE, BYE)
+ERROR = 5
+TYPES = (HELLO, FRAME, DONE, BYE, ERROR)
 
 FLAG_EFF = 0x01
 FLAG_RTR = 0x02
 FLAG_INFO = 0x80
 FRAME_FLAGS = FLAG_EFF | FLAG_RTR | FLAG_INFO
 HELLO_ACTIVE = 0x01
+HELLO_LISTEN = 0x02        # held, sends nothing, sees only frames not destroyed
+DONE_ERROR = 0x01          # DONE: this client destroyed the frame (a bus error)
+# bus time a destroyed frame adds past its own end: error flag (6), error
+# delimiter (8), intermission (3), less the 3 intermission bits it had
+ERROR_BITS = 14
 
 SFF_MAX = 0x7FF
 EFF_MAX = 0x1FFFFFFF
@@ -78,9 +86,20 @@ class Record:
         return bool(self.flags & FLAG_INFO)
 
     @property
+    def destroyed(self) -> bool:
+        """DONE from a client: it destroyed the frame (a bus error)."""
+        return self.type == DONE and bool(self.flags & DONE_ERROR)
+
+    @property
     def active(self) -> bool:
         """HELLO from a client: it answers frames (holds the guest)."""
         return self.type == HELLO and bool(self.flags & HELLO_ACTIVE)
+
+    @property
+    def listen(self) -> bool:
+        """HELLO from a client: a listener (holds the guest, answers
+        nothing, gets only the frames that were not destroyed)."""
+        return self.type == HELLO and bool(self.flags & HELLO_LISTEN)
 
 
 def _check(rec: Record) -> None:
@@ -92,9 +111,9 @@ def _check(rec: Record) -> None:
         raise ProtocolError(f"t_ns {rec.t_ns} out of range")
     if not 0 <= rec.seq < 1 << 32:
         raise ProtocolError(f"seq {rec.seq} out of range")
-    if rec.type == FRAME:
-        if rec.flags & ~FRAME_FLAGS:
-            raise ProtocolError(f"unknown FRAME flags {rec.flags:#x}")
+    if rec.type in (FRAME, ERROR):
+        if rec.flags & ~(FRAME_FLAGS if rec.type == FRAME else FLAG_EFF | FLAG_RTR):
+            raise ProtocolError(f"unknown {'FRAME' if rec.type == FRAME else 'ERROR'} flags {rec.flags:#x}")
         if not 0 <= rec.dlc <= 8:
             raise ProtocolError(f"dlc {rec.dlc} over 8")
         limit = EFF_MAX if rec.eff else SFF_MAX
@@ -105,6 +124,8 @@ def _check(rec: Record) -> None:
             raise ProtocolError(f"{len(rec.data)} data bytes for dlc {rec.dlc}"
                                 f"{' (remote frame)' if rec.rtr else ''}")
     else:
+        if rec.type == DONE and rec.flags & ~DONE_ERROR:
+            raise ProtocolError(f"unknown DONE flags {rec.flags:#x}")
         if rec.dlc != 0 and rec.type != HELLO:
             raise ProtocolError(f"dlc {rec.dlc} in a non-FRAME record")
         if not 0 <= rec.can_id < 1 << 32:
@@ -129,7 +150,7 @@ def unpack(buf: bytes) -> Record:
     typ, flags, dlc, rsvd, can_id, t_ns, data, seq, rsvd2 = RECORD.unpack(buf)
     if rsvd != 0 or rsvd2 != 0:
         raise ProtocolError("nonzero reserved field")
-    if typ == FRAME:
+    if typ in (FRAME, ERROR):
         if dlc > 8:
             raise ProtocolError(f"dlc {dlc} over 8")
         used = 0 if flags & FLAG_RTR else dlc
@@ -224,9 +245,10 @@ class Link:
     and :meth:`done` may be called from another thread than :meth:`recv`.
     """
 
-    def __init__(self, sock: socket.socket, active: bool) -> None:
+    def __init__(self, sock: socket.socket, active: bool, listen: bool = False) -> None:
         self.sock = sock
-        self.active = active
+        self.active = active or listen      # owes a DONE for every guest frame
+        self.listen = listen
         self.bitrate = 0
         self.t_hello_ns = 0
         self.closed = False
@@ -236,17 +258,17 @@ class Link:
 
     @classmethod
     def connect(cls, path: str, active: bool = False, name: str = "",
-                timeout: float = 10.0) -> Link:
+                timeout: float = 10.0, listen: bool = False) -> Link:
         """Connect to ``path``, say HELLO, and read QEMU's HELLO (at most
-        ``timeout`` seconds). FRAMEs that arrive before it are kept for
+        ``timeout`` seconds). FRAMEs and ERRORs that arrive before it are kept for
         :meth:`recv`."""
         sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             sock.settimeout(timeout)
             sock.connect(path)
             sock.settimeout(None)
-            link = cls(sock, active)
-            link._send(Record(HELLO, HELLO_ACTIVE if active else 0,
+            link = cls(sock, active, listen)
+            link._send(Record(HELLO, (HELLO_ACTIVE if active or listen else 0) | (HELLO_LISTEN if listen else 0),
                               data=name.encode("ascii", "replace")[:8]))
             deadline = time.monotonic() + timeout
             while True:
@@ -261,7 +283,7 @@ class Link:
                     return link
                 if rec.type == BYE:
                     raise ProtocolError(f"{path}: BYE before HELLO")
-                if rec.type == FRAME:
+                if rec.type in (FRAME, ERROR):
                     link._pending.append(rec)
         except BaseException:
             sock.close()
@@ -297,12 +319,14 @@ class Link:
         return unpack(raw)
 
     def recv(self, timeout: float | None = None) -> Record | None:
-        """The next FRAME or BYE from QEMU (a DONE or HELLO is a protocol
-        error); None if ``timeout`` seconds passed first."""
+        """The next FRAME, ERROR (a frame destroyed by a bus error: its
+        ``seq``, and ``t_ns`` = the end of the error frame) or BYE from QEMU
+        (a DONE or HELLO is a protocol error); None if ``timeout`` seconds
+        passed first."""
         if self._pending:
             return self._pending.pop(0)
         rec = self._read(timeout)
-        if rec is not None and rec.type not in (FRAME, BYE):
+        if rec is not None and rec.type not in (FRAME, BYE, ERROR):
             raise ProtocolError(f"unexpected record type {rec.type} from QEMU")
         if rec is not None and rec.type == BYE:
             self.closed = True
@@ -312,14 +336,20 @@ class Link:
                    rtr: bool = False, dlc: int | None = None, t_ns: int = 0) -> None:
         """Put a frame on the bus: as the answer to the frame being handled
         (active client, before its DONE) or as a frame outside an exchange.
-        ``t_ns`` is the earliest guest time it may start (0: none)."""
+        ``t_ns`` is the earliest guest time it may start (0: none). A
+        listener may not send (QEMU would close the link)."""
+        if self.listen:
+            raise ProtocolError("a listener sends no frames")
         n = len(data) if dlc is None else dlc
         self._send(Record(FRAME, (FLAG_EFF if eff else 0) | (FLAG_RTR if rtr else 0),
                           n, can_id, t_ns, b"" if rtr else bytes(data), 0))
 
-    def done(self, seq: int) -> None:
-        """End the exchange of frame ``seq``."""
-        self._send(Record(DONE, seq=seq))
+    def done(self, seq: int, error: bool = False) -> None:
+        """End the exchange of frame ``seq``; ``error``: this client destroys
+        it with a bus error (it models a fault on the bus: the sending
+        controller counts the error and retransmits, every client gets
+        ERROR, the answers to it are dropped)."""
+        self._send(Record(DONE, DONE_ERROR if error else 0, seq=seq))
 
     def close(self) -> None:
         """Say BYE (if the socket still works) and close."""

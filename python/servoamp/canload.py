@@ -34,6 +34,25 @@ _MASTER_RE = re.compile(r"^stats can=(\d+) " + " ".join(f"{f}=" + r"(\d+)" for f
                         + r"\r?$", re.M)
 
 
+# The CAN controller driver's counters (rpu_app/src/canps.c), the line after
+# the master's: frames, interrupts, error counters and states, bus off.
+CONTROLLER_FIELDS = ("bus", "tx", "tx_busy", "rx", "rx_dropped", "rx_fifo_overflow", "ring_max",
+                     "irqs", "errors", "tec", "rec", "error_passive", "bus_off", "recoveries")
+_CONTROLLER_RE = re.compile(r"^stats canps=(\d+) " + " ".join(f"{f}=" + r"(\d+)" for f in CONTROLLER_FIELDS[1:])
+                            + r"\r?$", re.M)
+
+
+def controller_stats(text: str, bus: int | None = None) -> list[dict[str, int]]:
+    """The CAN driver's ``stats canps=`` lines in ``text``, in order, as
+    dicts of CONTROLLER_FIELDS; only bus ``bus``'s if given."""
+    out = []
+    for m in _CONTROLLER_RE.finditer(text):
+        d = dict(zip(CONTROLLER_FIELDS, map(int, m.groups())))
+        if bus is None or d["bus"] == bus:
+            out.append(d)
+    return out
+
+
 def master_stats(text: str, bus: int | None = None) -> list[dict[str, int]]:
     """The master's ``stats can=`` lines in ``text`` (a UART log, CR LF or
     LF), in order, as dicts of MASTER_FIELDS; only bus ``bus``'s if given."""

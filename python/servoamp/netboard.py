@@ -140,12 +140,15 @@ class ControllerBoard:
                                                 *self.drivesim_args])
                 if self.can_log is not None:
                     self.can_log.mkdir(parents=True, exist_ok=True)
-                    # active: QEMU waits for it as for the drives, so a
-                    # logger that falls behind holds the guest instead of
-                    # filling its socket and being dropped (every frame logged)
+                    # a listener: QEMU waits for it as for the drives, so
+                    # a logger that falls behind holds the guest instead of
+                    # filling its socket and being dropped (every frame
+                    # logged), and it gets only the frames that made it (a
+                    # frame a bus error destroyed is an error frame)
                     self._can_proc(f"canlog{b}", [sys.executable, "-m", "can.logger", "-i", "servoamp",
                                                   "-c", str(self.can_socks[b]), "-f",
-                                                  str(self.can_log_path(b)), "--bus-kwargs", "active=true"])
+                                                  str(self.can_log_path(b)), "--bus-kwargs",
+                                                  "listen_only=true"])
             self.boot_times = qemu.boot_to_shell(self.machine, timeout=timeout)
             bring_up(self.machine.uart(0), self.prompt, GUEST_ADDR, timeout=20)
         except BaseException:

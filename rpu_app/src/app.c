@@ -217,6 +217,11 @@ void app_resume(void)
 	resume_req = 1;
 }
 
+int app_resume_allowed(void)
+{
+	return safestop || (axis_can_count() && axis_can_faulted());
+}
+
 int app_in_safestop(void)
 {
 	return (int)safestop;

@@ -27,6 +27,9 @@ void app_safestop(uint32_t reason);
 /* Leave safe stop (SP_CMD_RESUME). */
 void app_resume(void);
 int app_in_safestop(void);
+/* SP_CMD_RESUME is taken in safe stop, or while a drive's fault is
+ * latched (the resume acknowledges it: axis_ops.resume). */
+int app_resume_allowed(void);
 uint32_t app_fault(void);
 uint32_t app_safestops(void);
 uint32_t app_stop_cycles(void);

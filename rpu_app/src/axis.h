@@ -82,6 +82,7 @@ void axis_can_cycle_end(void);
 void axis_can_stop(void);
 void axis_can_log_stats(void);
 uint32_t axis_can_count(void);	/* CAN axes configured */
+int axis_can_faulted(void);	/* 1 while a CAN axis' fault is latched */
 
 /* The counters of one bus: its master's and its controller's. */
 struct axis_can_stats {

@@ -229,6 +229,17 @@ static const struct co_node *node_of(uint32_t i)
 	return co_master_node(&bus[a->bus].m, a->idx);
 }
 
+int axis_can_faulted(void)
+{
+	for (uint32_t i = 0; i < AMP_MAX_AXES; i++) {
+		const struct co_node *n = cax[i].used ? node_of(i) : 0;
+
+		if (n && n->fault)
+			return 1;
+	}
+	return 0;
+}
+
 static void can_init(uint32_t i)
 {
 	(void)i;	/* axis_can_init sets up every CAN axis at once */
@@ -250,6 +261,9 @@ static void can_resume(uint32_t i)
 {
 	cax[i].primed = 0;
 	cax[i].ss_active = 0;
+	/* resume acknowledges the drive's fault (a bus off, an EMCY...) */
+	if (cax[i].used && cax[i].bus < NBUS)
+		co_master_renew_enable(&bus[cax[i].bus].m, cax[i].idx);
 }
 
 static void log_changes(uint32_t i, const struct co_node *n)

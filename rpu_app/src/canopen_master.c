@@ -241,6 +241,12 @@ void co_master_stats(const struct co_master *m, struct co_stats *out)
 	*out = m->st;
 }
 
+void co_master_renew_enable(struct co_master *m, uint32_t idx)
+{
+	if (idx < m->n_nodes)
+		m->node[idx].enable_prev = 0;
+}
+
 void co_master_bus_off(struct co_master *m)
 {
 	m->st.bus_off++;

@@ -189,6 +189,11 @@ int co_master_stamp_due(const struct co_master *m);
 void co_master_time_stamp(struct co_master *m, uint32_t now_us);
 /* The axis' command for the next cycle's RPDO. */
 void co_master_set(struct co_master *m, uint32_t idx, int enable, int32_t target);
+/* The operator's acknowledgement (the servo's resume): the next enable
+ * request counts as a new one, even if the axis never stopped asking,
+ * so it acknowledges a latched fault (and resets a drive in Fault, or
+ * retries a failed start-up) as a rising edge of enable does. */
+void co_master_renew_enable(struct co_master *m, uint32_t idx);
 /* The bus went off (and was restarted by the driver): every operational
  * node's axis faults with CO_ERR_BUS_OFF; counted. */
 void co_master_bus_off(struct co_master *m);

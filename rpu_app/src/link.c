@@ -419,7 +419,7 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 	case SP_CMD_RESUME:
 		if (nw)
 			return SP_E_LENGTH;
-		if (!app_in_safestop())
+		if (!app_resume_allowed())
 			return SP_E_STATE;
 		app_resume();
 		return SP_OK;

@@ -26,6 +26,7 @@ R_TXID, R_TXDLC, R_TXDW1, R_TXDW2 = 0x30, 0x34, 0x38, 0x3C
 R_RXID, R_RXDLC, R_RXDW1, R_RXDW2 = 0x50, 0x54, 0x58, 0x5C
 SRR_CEN = 1 << 1
 SR_NORMAL = 1 << 3
+SR_ESTAT_ACTIVE = 1 << 7           # ESTAT 1: error active
 ISR_TXOK = 1 << 1
 ISR_RXOK = 1 << 4
 ISR_RXNEMP = 1 << 7
@@ -133,7 +134,7 @@ class Board:
         self.writel(CAN0 + R_SRR, 0)
         self.writel(CAN0 + R_MSR, 0)
         self.writel(CAN0 + R_SRR, SRR_CEN)
-        assert self.readl(CAN0 + R_SR) == SR_NORMAL
+        assert self.readl(CAN0 + R_SR) == SR_NORMAL | SR_ESTAT_ACTIVE
 
     def send(self, f: GuestFrame) -> None:
         """Write a frame into CAN0's TX FIFO; the model sends it on the

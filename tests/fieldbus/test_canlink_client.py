@@ -17,7 +17,7 @@ import can
 import pytest
 
 from servoamp import canlink
-from servoamp.canlink import BYE, DONE, FRAME, HELLO, ProtocolError, Record
+from servoamp.canlink import BYE, DONE, ERROR, FRAME, HELLO, ProtocolError, Record
 
 
 def test_record_roundtrip_and_layout() -> None:
@@ -28,6 +28,23 @@ def test_record_roundtrip_and_layout() -> None:
     assert struct.unpack_from("<IQ", raw, 4) == (0x1234567, 123456789)
     assert raw[16:24] == b"\x01\x02\x03\0\0\0\0\0" and struct.unpack_from("<II", raw, 24) == (42, 0)
     assert canlink.unpack(raw) == rec
+
+
+def test_error_and_done_records() -> None:
+    # ERROR carries the destroyed frame's identifier, dlc and data, like FRAME
+    err = Record(ERROR, canlink.FLAG_EFF, 2, 0x1ABCDEF, 5_000, b"\x01\x02", 9)
+    raw = canlink.pack(err)
+    assert raw[:4] == bytes([5, 1, 2, 0])
+    assert canlink.unpack(raw) == err
+    # DONE: flag bit 0 = the client destroys the frame; no other flag
+    done = canlink.unpack(canlink.pack(Record(DONE, canlink.DONE_ERROR, seq=4)))
+    assert done.destroyed and not Record(DONE, seq=4).destroyed
+    with pytest.raises(ProtocolError, match="DONE flags"):
+        canlink.pack(Record(DONE, 0x02, seq=4))
+    with pytest.raises(ProtocolError, match="ERROR flags"):
+        canlink.pack(Record(ERROR, canlink.FLAG_INFO, 0, 0x80, 1, b"", 1))
+    with pytest.raises(ProtocolError, match="dlc 9"):
+        canlink.unpack(bytes([5, 0, 9, 0]) + bytes(28))
 
 
 @pytest.mark.parametrize("mutate, why", [
@@ -144,6 +161,36 @@ def test_active_bus_sends_done_when_the_application_reads_again(peer: Peer, tmp_
     assert peer.read().type == BYE
 
 
+def test_a_destroyed_frame_is_an_error_frame_and_owes_no_done(peer: Peer, tmp_path: Path) -> None:
+    with can.Bus(interface="servoamp", channel=str(tmp_path / "can.sock"), active=True) as bus:
+        assert peer.ready.wait(5)
+        peer.write(Record(FRAME, 0, 0, 0x080, 1000, b"", 1))
+        assert bus.recv(5) is not None
+        peer.write(Record(ERROR, 0, 0, 0x080, 1061, b"", 1))
+        m = bus.recv(5)
+        assert m is not None and m.is_error_frame and m.arbitration_id == 0x080
+        assert m.timestamp == pytest.approx(1.061e-6)
+        assert peer.read() == Record(DONE, seq=1)        # the DONE of the FRAME only
+        assert bus.recv(0.05) is None
+        assert not peer.pending()
+    assert peer.read().type == BYE
+
+
+def test_listen_only_bus_holds_the_guest_and_sends_nothing(peer: Peer, tmp_path: Path) -> None:
+    with can.Bus(interface="servoamp", channel=str(tmp_path / "can.sock"), listen_only="true") as bus:
+        assert peer.ready.wait(5) and peer.hello is not None
+        assert peer.hello.active and peer.hello.listen
+        assert "listen-only" in bus.channel_info
+        peer.write(Record(FRAME, 0, 0, 0x080, 1000, b"", 1))
+        assert bus.recv(5) is not None
+        assert bus.recv(0.05) is None
+        assert peer.read() == Record(DONE, seq=1)        # held like an active client
+        with pytest.raises(can.CanOperationError, match="listen-only"):
+            bus.send(can.Message(arbitration_id=0x181, data=b"\x01", is_extended_id=False))
+        assert not peer.pending()
+    assert peer.read().type == BYE
+
+
 def test_bye_and_bad_records_end_the_bus(peer: Peer, tmp_path: Path) -> None:
     bus = can.Bus(interface="servoamp", channel=str(tmp_path / "can.sock"))
     try:
@@ -168,6 +215,30 @@ def test_drivesim_serves_as_an_active_client(peer: Peer, tmp_path: Path) -> None
     assert answer.can_id == 0x585 and answer.data[:4] == bytes([0x43, 0x00, 0x10, 0x00])
     assert struct.unpack_from("<I", answer.data, 4)[0] == 0x00020192
     assert peer.read() == Record(DONE, seq=1)
+    peer.write(Record(BYE))
+    t.join(10)
+    assert not t.is_alive()
+
+
+def test_drivesim_bus_short_destroys_every_frame_for_its_time(peer: Peer, tmp_path: Path) -> None:
+    """``--bus-short 0.002:1``: from 2 ms of guest time for 1 ms every guest
+    frame ends with DONE ERROR and the drives neither see it nor answer."""
+    from servoamp.drivesim.__main__ import main
+    t = threading.Thread(target=main, args=(["--socket", str(tmp_path / "can.sock"), "--nodes", "4",
+                                             "--bus-short", "0.002:1"],), daemon=True)
+    t.start()
+    assert peer.ready.wait(10)
+    assert peer.read().can_id == 0x704                                         # boot-up
+    sdo = bytes([0x40, 0x00, 0x10, 0, 0, 0, 0, 0])
+    for seq, t_ns, destroyed in ((1, 1_999_999, False), (2, 2_000_000, True), (3, 2_999_999, True),
+                                 (4, 3_000_000, False)):
+        peer.write(Record(FRAME, 0, 8, 0x604, t_ns, sdo, seq))
+        if destroyed:
+            assert peer.read() == Record(DONE, canlink.DONE_ERROR, seq=seq)
+            peer.write(Record(ERROR, 0, 8, 0x604, t_ns + 14_000, sdo, seq))   # ignored
+        else:
+            assert peer.read().can_id == 0x584
+            assert peer.read() == Record(DONE, seq=seq)
     peer.write(Record(BYE))
     t.join(10)
     assert not t.is_alive()

@@ -36,6 +36,12 @@ def test_control_answers_and_injects(tmp_path: Path) -> None:
         assert control_request(ctl.path, "fault x off").startswith("error: node 'x'")
         assert control_request(ctl.path, "fault 1 melt").startswith("error: fault kind 'melt'")
         assert control_request(ctl.path, "reboot").startswith("error: requests are")
+        assert control_request(ctl.path, "bus-short 20") == "ok bus-short 20"
+        assert ctl.short.next_ms == 20
+        assert ctl.short.shorted(10**9)                         # from the next frame on
+        assert ctl.short.shorted(10**9 + 20 * 10**6 - 1) and not ctl.short.shorted(10**9 + 20 * 10**6)
+        assert control_request(ctl.path, "bus-short 0").startswith("error: bus-short 0")
+        assert control_request(ctl.path, "bus-short x").startswith("error: bus-short 'x'")
         st = control_request(ctl.path, "state")
         assert st.startswith("ok 1: ") and "; 2: " in st
     finally:

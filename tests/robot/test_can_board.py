@@ -5,7 +5,7 @@ The board runs Linux, servod and the servo firmware built for
 boards/zynq7000_qemu/servo-can.dts (rpu_app-can.elf: its four axes on CAN
 drives, nodes 1 and 2 on each of the two buses). Each bus is linked in
 lockstep to its own drive simulator (servoamp-drivesim) and to a
-python-can logger (can.logger, ASC; active, so QEMU waits for it) through QEMU's can-host-lockstep
+python-can logger (can.logger, ASC; a listener, so QEMU waits for it) through QEMU's can-host-lockstep
 backend (docs/canlink.md, docs/fieldbus.md). The servo core is the CANopen
 master; Linux sees the drives only through the feedback records:
 
@@ -17,6 +17,11 @@ master; Linux sees the drives only through the feedback records:
   (the firmware's `stats can=` lines);
 * the loggers hold every frame: a SYNC in every cycle, each with both
   drives' RPDOs before it and both TPDOs after it, in guest time;
+* bus off: a 20 ms short of can1 (the drive simulator destroys every
+  frame) takes its controller bus off; the firmware restarts it, faults
+  the bus's axes with 0x8140, and `ampctl resume` enables them again; the
+  logger (a canlink listener) and the bridge hold the destroyed attempts as
+  error frames;
 * the bridge (servoamp bridge, can_links) carries every frame: its MCAP
   holds each frame the loggers hold while it ran, on the cycle records'
   clock (each SYNC in its cycle), and the Foxglove WebSocket protocol's
@@ -37,6 +42,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import can
 import pytest
 from mcap.reader import make_reader
 
@@ -60,6 +66,8 @@ FOLLOW_ERR_MAX_UM = 300.0
 FAULTS = {0: (0, 1, "following-error", 0x8611), 1: (0, 2, "over-current", 0x2310),
           2: (1, 1, "off-bus", 0x8130)}
 TIME_STAMP = bridge.TIME_STAMP_ID      # the master's time stamp PDO (0x1FF), once a second
+SHORT_BUS, SHORT_MS = 1, 20            # the bus short: can1 for 20 ms of guest time
+CO_ERR_BUS_OFF = 0x8140                # the master's "recovered from bus off"
 HB_CONSUMER_MS = 60                    # servo.dts: can-heartbeat-consumer-ms
 EMCY_BOUND_CYCLES = 3                  # EMCY on the bus to the axis fault in the firmware
 AXIS_LOG = re.compile(r"^axis(\d): can(\d) node (\d+): (.*?)(, fault,|,) error ([0-9a-f]{4}) "
@@ -186,6 +194,28 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
     out["last"] = now
     out["final_st"] = _status(cb)
 
+    # bus off: the drive simulator shorts can1 for SHORT_MS; every frame is
+    # destroyed, the controller goes bus off, the firmware restarts it and
+    # faults the bus's axes with 0x8140; a new enable request (resume)
+    # acknowledges it and the axes are enabled again
+    short_axes = [a for a in range(AXES) if a // 2 == SHORT_BUS]
+    out["short_ans"] = cb.drives(SHORT_BUS, f"bus-short {SHORT_MS}")
+    out["busoff_st"] = _wait(
+        cb, lambda st: all(st.get(f"axis{a}.error") == f"0x{CO_ERR_BUS_OFF:04x}" for a in short_axes),
+        f"axes {short_axes}: error 0x{CO_ERR_BUS_OFF:04x} (bus off)", 240)
+    # the retransmissions took bus time the frames after them wait for:
+    # resume once the bus has caught up (guest time)
+    cb.sh("sleep 0.5", timeout=120)
+    cb.ampctl("resume", expected_rc=None)
+    out["busoff_enabled"] = _wait(cb, _enabled, "every axis enabled again after the bus off", 240)
+    # a statistics line of both buses from after the recovery
+    n = len(canload.controller_stats(servo.output))
+    deadline = time.monotonic() + 300
+    while len(canload.controller_stats(servo.output)) < n + 2 * len(DRIVES):
+        assert time.monotonic() < deadline, "no CAN statistics after the bus off"
+        time.sleep(1)
+    out["busoff_log"] = servo.output
+
     # faults, one per drive, each while the bus runs: injected through
     # the simulators' control sockets, seen by Linux in the feedback
     out["faults"] = {}
@@ -208,6 +238,42 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
     out["fault_st"] = _status(cb)
     out["servo_log"] = servo.output
     out["servod_log"] = cb.sh(f"cat {netboard.SERVOD_LOG}")
+
+
+def test_bus_off_is_recovered(run: dict[str, Any]) -> None:
+    assert run["short_ans"] == f"ok bus-short {SHORT_MS}"
+    st = run["busoff_st"]
+    for a in range(AXES):
+        if a // 2 == SHORT_BUS:
+            assert st[f"axis{a}.error"] == f"0x{CO_ERR_BUS_OFF:04x}", st
+        else:
+            assert st[f"axis{a}.error"] == "0x0000", st       # the other bus carried on
+    en = run["busoff_enabled"]
+    assert all(en[f"axis{a}.error"] == "0x0000" for a in range(AXES)), en
+    log = run["busoff_log"]
+    ctl = {b: canload.controller_stats(log, b)[-1] for b in DRIVES}
+    print(f"\ncan{SHORT_BUS} after a {SHORT_MS} ms short: {ctl[SHORT_BUS]}")
+    c = ctl[SHORT_BUS]
+    # every bus off noted was followed by a restart; 32 destroyed attempts
+    # (TEC + 8 from 0 past 255) raise at least one error interrupt each time
+    assert c["bus_off"] >= 1 and c["recoveries"] == c["bus_off"], c
+    assert c["errors"] >= c["bus_off"] and c["tec"] == 0 and c["rec"] == 0, c
+    assert ctl[1 - SHORT_BUS]["bus_off"] == ctl[1 - SHORT_BUS]["errors"] == 0, ctl
+    restarts = re.findall(rf"^can{SHORT_BUS}: bus off: controller restarted \((\d+) so far\)", log, re.M)
+    assert restarts and int(restarts[-1]) == c["recoveries"], restarts
+    # the master went on: SYNCs on both buses after the recovery
+    m = {b: canload.master_stats(log, b) for b in DRIVES}
+    for b in DRIVES:
+        assert m[b][-1]["sync"] > m[b][-2]["sync"] and m[b][-1]["nodes_op"] == 2, m[b][-2:]
+    # the listener logged each destroyed attempt as an error frame and none
+    # of them as a frame; the bridge recorded the same error frames
+    errs = [msg for msg in can.LogReader(str(run["asc"][SHORT_BUS])) if msg.is_error_frame]
+    assert len(errs) >= 32 * c["bus_off"], (len(errs), c)
+    frames, _events, _codes = _mcap(run["mcap"])
+    mcap_errs = [m for _lt, _t, m in frames[SHORT_BUS] if m.error]
+    last = max(t for _lt, t, _m in frames[SHORT_BUS])
+    assert len(mcap_errs) == len(errs), (run["bridge"], len(frames[SHORT_BUS]), last, errs[0])
+    assert not any(m.error for _lt, _t, m in frames[1 - SHORT_BUS])
 
 
 def test_every_axis_reaches_operation_enabled(run: dict[str, Any]) -> None:
@@ -321,7 +387,7 @@ def test_the_bridge_records_every_frame(run: dict[str, Any]) -> None:
     assert set(frames) == set(DRIVES), (set(frames), br)
     for bus, rec in frames.items():
         assert len(rec) == br["frames"][bus]
-        mine = sorted((t, m.id, m.data) for _lt, t, m in rec)
+        mine = sorted((t, m.id, m.data) for _lt, t, m in rec if not m.error)
         t0, t1 = mine[0][0], mine[-1][0]
         # every frame a logger holds while the bridge ran is in the MCAP,
         # the same frame at the same bus time. The ASC file's times count
@@ -373,7 +439,7 @@ def test_the_frames_sit_in_their_cycles(run: dict[str, Any]) -> None:
     assert seen == 2
     for bus, rec in frames.items():
         phases = [lt - ev[bisect.bisect_right(ev, lt) - 1] for lt, _t, m in rec
-                  if m.id == 0x80 and ev[0] <= lt <= ev[-1]]
+                  if m.id == 0x80 and not m.error and ev[0] <= lt <= ev[-1]]
         print(f"\ncan{bus}: {len(phases)} SYNCs, {min(phases) / 1e3:.0f}..{max(phases) / 1e3:.0f} us after "
               f"servod's cycle interrupt (median {statistics.median(phases) / 1e3:.0f}); offset "
               f"{run['bridge']['offset_ns']} ns")

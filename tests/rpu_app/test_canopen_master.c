@@ -652,6 +652,23 @@ static void test_tx_full(void)
 	CHECK_EQ(m.st.bus_off, 1);
 	CHECK_EQ(co_master_node(&m, 0)->error_code, CO_ERR_BUS_OFF);
 	CHECK_EQ(co_master_node(&m, 1)->error_code, CO_ERR_BUS_OFF);
+	/* latched while the axes keep asking for enable; the drives, not in
+	 * Fault themselves, are only shut down */
+	run(&m, 5);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 1);
+	CHECK_EQ(co_master_node(&m, 1)->error_code, CO_ERR_BUS_OFF);
+	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_READY_TO_SWITCH_ON);
+	/* the operator's acknowledgement (resume) with enable held: a new
+	 * enable request, the fault cleared, the drives enabled again */
+	co_master_renew_enable(&m, 0);
+	co_master_renew_enable(&m, 1);
+	co_master_renew_enable(&m, 7);	/* no such node: nothing */
+	run(&m, 8);
+	for (uint32_t i = 0; i < 2; i++) {
+		CHECK_EQ(co_master_node(&m, i)->fault, 0);
+		CHECK_EQ(co_master_node(&m, i)->error_code, 0);
+		CHECK_EQ(co_master_node(&m, i)->state402, CO402_OPERATION_ENABLED);
+	}
 }
 
 static void test_pdo_missing(void)

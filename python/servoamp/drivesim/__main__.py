@@ -3,11 +3,17 @@
 ACTIVE canlink client (docs/fieldbus.md, docs/canlink.md).
 
     servoamp-drivesim --socket build/can0.sock --nodes 1,2 [--eds FILE]
-                      [--fault NODE:KIND@T_S ...]
+                      [--fault NODE:KIND@T_S ...] [--bus-short T_S:MS ...]
 
 One loop: read a frame, hand it to every drive with its guest time, send
 their answers, then DONE. No host timers: what the drives do depends only
 on the frames and their guest times, so a run is repeatable.
+
+A bus short (``--bus-short``, or ``bus-short MS`` on the control socket)
+destroys every frame on the bus for MS ms of guest time: each guest frame
+is ended with DONE ERROR (a bus error: the controller counts it and
+retransmits, so it goes error passive and bus off), the drives see none
+and send nothing, their heartbeats stop with them.
 """
 
 from __future__ import annotations
@@ -57,6 +63,43 @@ def send(link: canlink.Link, frames: list[Frame]) -> None:
         link.send_frame(f.can_id, f.data, t_ns=f.t_ns)
 
 
+class BusShort:
+    """When the bus is shorted, in guest time (the frames' bus end times).
+    A short asked for "now" starts at the next frame."""
+
+    def __init__(self, windows: list[tuple[int, int]] | None = None) -> None:
+        self.windows = sorted(windows or [])          # (start ns, end ns)
+        self.next_ms: int | None = None
+        self.frames_destroyed = 0
+
+    @staticmethod
+    def parse(text: str) -> tuple[int, int]:
+        """``T_S:MS``, e.g. ``2.5:20``: from 2.5 s of guest time, 20 ms."""
+        try:
+            at, ms = text.split(":", 1)
+            start = round(float(at) * 1e9)
+            dur = round(float(ms) * 1e6)
+        except ValueError:
+            raise ValueError(f"--bus-short {text!r}: expected T_S:MS, e.g. 2.5:20") from None
+        if start < 0 or dur <= 0:
+            raise ValueError(f"--bus-short {text!r}: the time must be >= 0 and the length > 0")
+        return start, start + dur
+
+    def request(self, ms: int) -> None:
+        self.next_ms = ms
+
+    def shorted(self, t_ns: int) -> bool:
+        if self.next_ms is not None:
+            self.windows.append((t_ns, t_ns + self.next_ms * 1_000_000))
+            self.windows.sort()
+            logging.getLogger("servoamp.drivesim").info(
+                "bus shorted from %.6f s for %d ms", t_ns / 1e9, self.next_ms)
+            self.next_ms = None
+        while self.windows and self.windows[0][1] <= t_ns:
+            self.windows.pop(0)
+        return bool(self.windows) and self.windows[0][0] <= t_ns
+
+
 class Control:
     """``--control PATH``: a Unix socket taking one request line per
     connection, answered with one line, then closed:
@@ -64,16 +107,19 @@ class Control:
     - ``fault NODE KIND``: inject KIND (following-error, over-current,
       off-bus) into drive NODE with the next frame on the bus (its guest
       time is the fault's; ``-v`` logs it);
+    - ``bus-short MS``: short the bus for MS ms of guest time from the
+      next frame (every frame destroyed by a bus error, see BusShort);
     - ``state``: each drive's node id, CiA 402 state, NMT state, off-bus.
 
     Polled once per frame, so it acts only while the bus carries traffic
     (the master's SYNC every cycle)."""
 
-    def __init__(self, path: str, drives: list[Drive]) -> None:
+    def __init__(self, path: str, drives: list[Drive], short: BusShort | None = None) -> None:
         if os.path.exists(path):
             os.unlink(path)
         self.path = path
         self.drives = {d.node_id: d for d in drives}
+        self.short = short if short is not None else BusShort()
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self.sock.bind(path)
         self.sock.listen(4)
@@ -93,10 +139,19 @@ class Control:
                 return f"error: fault kind {words[2]!r} unknown"
             self.drives[node].inject(kind)
             return f"ok fault {node} {kind.value}"
+        if len(words) == 2 and words[0] == "bus-short":
+            try:
+                ms = int(words[1], 0)
+            except ValueError:
+                return f"error: bus-short {words[1]!r}: not a whole number of ms"
+            if not 1 <= ms <= 60_000:
+                return f"error: bus-short {ms}: 1..60000 ms"
+            self.short.request(ms)
+            return f"ok bus-short {ms}"
         if words == ["state"]:
             return "ok " + "; ".join(f"{n}: {d.state.name} nmt={d.nmt.name} off_bus={int(d.off_bus)}"
                                      for n, d in sorted(self.drives.items()))
-        return "error: requests are 'fault NODE KIND' and 'state'"
+        return "error: requests are 'fault NODE KIND', 'bus-short MS' and 'state'"
 
     def poll(self) -> None:
         while select.select([self.sock], [], [], 0)[0]:
@@ -140,11 +195,14 @@ def control_request(path: str | Path, line: str, timeout: float = 10.0) -> str:
     return buf.decode("ascii", "replace").strip()
 
 
-def serve(link: canlink.Link, drives: list[Drive], control: Control | None = None) -> int:
+def serve(link: canlink.Link, drives: list[Drive], control: Control | None = None,
+          short: BusShort | None = None) -> int:
     """The loop: until QEMU says BYE or closes the socket. Returns the
     number of frames handled."""
     log = logging.getLogger("servoamp.drivesim")
     handled = 0
+    if short is None:
+        short = control.short if control is not None else BusShort()
     log.info("connected: %d bit/s, guest time %.6f s, nodes %s", link.bitrate,
              link.t_hello_ns / 1e9, ",".join(str(d.node_id) for d in drives))
     for d in drives:
@@ -160,8 +218,16 @@ def serve(link: canlink.Link, drives: list[Drive], control: Control | None = Non
         if rec is None or rec.type == canlink.BYE:
             log.info("QEMU said BYE")
             return handled
+        if rec.type == canlink.ERROR:
+            continue                    # a frame destroyed (by us or another client)
         if control is not None:
             control.poll()
+        if short.shorted(rec.t_ns):
+            if not rec.info:
+                short.frames_destroyed += 1
+                link.done(rec.seq, error=True)
+            handled += 1
+            continue
         answers: list[Frame] = []
         for d in drives:
             answers += d.on_frame(rec.can_id, rec.data, rec.t_ns, rtr=rec.rtr, eff=rec.eff)
@@ -180,10 +246,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fault", action="append", default=[], metavar="NODE:KIND@T_S",
                     help="inject a fault: KIND following-error | over-current | off-bus, "
                          "at guest time T_S seconds (repeatable)")
+    ap.add_argument("--bus-short", action="append", default=[], metavar="T_S:MS",
+                    help="short the bus from T_S s of guest time for MS ms: every frame destroyed "
+                    "by a bus error (the controller goes bus off)")
     ap.add_argument("--wait", type=float, default=10.0,
                     help="seconds to wait for the socket to appear (default 10)")
     ap.add_argument("--control", metavar="PATH",
-                    help="Unix socket for requests while running: 'fault NODE KIND', 'state'")
+                    help="Unix socket for requests while running: 'fault NODE KIND', 'bus-short MS', "
+                    "'state'")
     ap.add_argument("-v", "--verbose", action="store_true", help="log state changes and faults")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
@@ -191,6 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         nodes = parse_nodes(args.nodes)
         faults = [Injection.parse(f) for f in args.fault]
+        short = BusShort([BusShort.parse(t) for t in args.bus_short])
     except ValueError as exc:
         ap.error(str(exc))
     unknown = sorted({f.node for f in faults} - set(nodes))
@@ -202,10 +273,10 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, canlink.ProtocolError) as exc:
         print(f"servoamp-drivesim: {args.socket}: {exc}", file=sys.stderr)
         return 1
-    control = Control(args.control, drives) if args.control else None
+    control = Control(args.control, drives, short) if args.control else None
     try:
         with link:
-            n = serve(link, drives, control)
+            n = serve(link, drives, control, short)
     finally:
         if control is not None:
             control.close()

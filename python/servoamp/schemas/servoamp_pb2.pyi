@@ -202,7 +202,7 @@ class Session(_message.Message):
     def __init__(self, connection: _Optional[int] = ..., controller_id: _Optional[str] = ..., session_id: _Optional[str] = ..., wire_version: _Optional[int] = ..., n_axes: _Optional[int] = ..., cycle_period_ns: _Optional[int] = ..., clock_hz: _Optional[int] = ..., ring_capacity: _Optional[int] = ..., realtime_ns: _Optional[int] = ...) -> None: ...
 
 class CanFrame(_message.Message):
-    __slots__ = ("bus", "t_bus_ns", "id", "extended", "remote", "dlc", "data", "bits", "from_servo")
+    __slots__ = ("bus", "t_bus_ns", "id", "extended", "remote", "dlc", "data", "bits", "from_servo", "error")
     BUS_FIELD_NUMBER: _ClassVar[int]
     T_BUS_NS_FIELD_NUMBER: _ClassVar[int]
     ID_FIELD_NUMBER: _ClassVar[int]
@@ -212,6 +212,7 @@ class CanFrame(_message.Message):
     DATA_FIELD_NUMBER: _ClassVar[int]
     BITS_FIELD_NUMBER: _ClassVar[int]
     FROM_SERVO_FIELD_NUMBER: _ClassVar[int]
+    ERROR_FIELD_NUMBER: _ClassVar[int]
     bus: int
     t_bus_ns: int
     id: int
@@ -221,4 +222,5 @@ class CanFrame(_message.Message):
     data: bytes
     bits: int
     from_servo: bool
-    def __init__(self, bus: _Optional[int] = ..., t_bus_ns: _Optional[int] = ..., id: _Optional[int] = ..., extended: _Optional[bool] = ..., remote: _Optional[bool] = ..., dlc: _Optional[int] = ..., data: _Optional[bytes] = ..., bits: _Optional[int] = ..., from_servo: _Optional[bool] = ...) -> None: ...
+    error: bool
+    def __init__(self, bus: _Optional[int] = ..., t_bus_ns: _Optional[int] = ..., id: _Optional[int] = ..., extended: _Optional[bool] = ..., remote: _Optional[bool] = ..., dlc: _Optional[int] = ..., data: _Optional[bytes] = ..., bits: _Optional[int] = ..., from_servo: _Optional[bool] = ..., error: _Optional[bool] = ...) -> None: ...
