@@ -8,6 +8,22 @@
 #include "items.h"
 #include "pipeline.h"
 
+#ifdef MOTION_TEST_HOOKS
+/* Tests only (the Makefile compiles a second interp.o with
+ * -DMOTION_TEST_HOOKS for test_end_wait): called by a lane just before it
+ * releases a piece whose setpoints are all committed, so that a test can
+ * hold the lane there while other workers run. */
+void (*interp_test_release_hook)(const struct interp_lane *l,
+				 const struct piece *pc);
+#define INTERP_TEST_POINT(l, pc)                                 \
+	do {                                                     \
+		if (interp_test_release_hook)                    \
+			interp_test_release_hook((l), (pc));     \
+	} while (0)
+#else
+#define INTERP_TEST_POINT(l, pc) ((void)0)
+#endif
+
 int interp_init(struct interp *ip, struct motion *m,
 		const struct motion_config *cfg, const struct ring *segs,
 		const _Atomic uint64_t *issued, uint32_t lane_in,
@@ -84,7 +100,7 @@ uint32_t interp_run(void *arg, unsigned worker)
 	struct interp_lane *l = arg;
 	struct interp *ip = l->ip;
 	const double T = ip->T;
-	uint32_t done = 0;
+	uint32_t done = 0, released = 0;
 
 	(void)worker;
 	while (done < ip->batch) {
@@ -127,11 +143,21 @@ uint32_t interp_run(void *arg, unsigned worker)
 			/* at rest: the motion that accel started has ended */
 			atomic_fetch_sub(&ip->active, 1);
 		}
+		INTERP_TEST_POINT(l, pc);
 		ring_release(&l->in);
 		l->have = false;
+		released++;
 	}
 out:
 	atomic_fetch_add_explicit(&l->produced, done, memory_order_release);
+	/* Releasing a piece can end the run: motion_done() wants every lane's
+	 * input ring empty as well as every output ring, and the consumer may
+	 * have taken this piece's last setpoint (and found the piece still
+	 * here, so not woken motion_wait()) between our commit and this
+	 * release.  Then nothing else is left to run, so the wake-up is ours
+	 * to give. */
+	if (released)
+		pipeline_notify_end(ip->m);
 	return done;
 }
 
@@ -185,7 +211,9 @@ uint32_t interp_out_peak(const struct interp *ip)
 
 /* Upstream first: a lane releases a piece only after committing its last
  * setpoint, so empty input rings mean every setpoint is in an output
- * ring. */
+ * ring.  A lane's release can therefore be what makes this true (the
+ * consumer took the last setpoint before the release): interp_run()
+ * calls pipeline_notify_end() after releasing. */
 bool interp_drained(const struct interp *ip)
 {
 	for (uint32_t k = 0; k < ip->lanes; k++)

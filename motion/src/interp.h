@@ -122,6 +122,13 @@ uint32_t interp_out_peak(const struct interp *ip);
 /* Every piece dealt so far is sampled and every setpoint taken. */
 bool interp_drained(const struct interp *ip);
 
+#ifdef MOTION_TEST_HOOKS
+/* Tests only (interp.c): called by a lane just before it releases a piece
+ * whose setpoints are all committed. */
+extern void (*interp_test_release_hook)(const struct interp_lane *l,
+					const struct piece *pc);
+#endif
+
 /* One setpoint of segment g (profile p) at time tau into it, or exactly at
  * its end point (at_end); sp has sp_size() bytes. */
 void interp_sample(const struct interp *ip, int32_t *sp,

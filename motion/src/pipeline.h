@@ -26,8 +26,9 @@ void pipeline_record(struct motion *m, const struct motion_error *e);
 bool pipeline_faulted(const struct motion *m);
 
 /* Wakes motion_wait() callers if the run has ended.  Called after each
- * change that can end it: the last setpoint taken (interp's end marker,
- * a consumer's release) or a fault. */
+ * change that can end it: the end marker passed (accel), the last piece
+ * released by an interpolation lane, the last setpoint taken (a
+ * consumer's release) or a fault. */
 void pipeline_notify_end(struct motion *m);
 
 /* The look-ahead emits without a full window when nothing more can arrive

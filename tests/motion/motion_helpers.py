@@ -13,6 +13,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 BUILD = ROOT / "build" / "motion"
 TEST_BINARIES = (
+    "test_end_wait",
     "test_gcode",
     "test_lanes",
     "test_motion",

@@ -33,6 +33,7 @@ def test_asan_ubsan(binary: str) -> None:
         ("test_ring", ["spsc_threads"]),
         ("test_sched_threads", []),
         ("test_threads", []),
+        ("test_end_wait", []),
         ("test_lanes", ["pool_matches_sync"]),
         ("test_stream", ["stream_threaded"]),
     ],
