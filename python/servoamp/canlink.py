@@ -22,6 +22,7 @@ frame, with ISO 11898-1 bit stuffing, as QEMU's backend models it.
 
 from __future__ import annotations
 
+import re
 import select
 import socket
 import struct
@@ -225,12 +226,64 @@ def stuff_count(bits: list[int]) -> int:
     return count
 
 
+def _crc15_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte << 7
+        for _ in range(8):
+            crc = ((crc << 1) ^ CRC15_POLY) if crc & 0x4000 else crc << 1
+        table.append(crc & 0x7FFF)
+    return tuple(table)
+
+
+_CRC15_TABLE = _crc15_table()
+_RUNS = re.compile(r"0+|1+")
+
+
 def frame_bits(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) -> int:
     """Exact length in bits of a classic CAN data or remote frame on the
     wire: SOF to the last CRC bit with its stuff bits, plus the 13
-    unstuffed bits from the CRC delimiter to the end of intermission."""
-    bits = frame_bitstream(can_id, eff, rtr, dlc, data)
-    return len(bits) + stuff_count(bits) + TRAILER_BITS
+    unstuffed bits from the CRC delimiter to the end of intermission.
+
+    The same count as ``frame_bitstream`` + ``stuff_count`` (the reference,
+    bit by bit; a test compares them), about ten times faster: the bridge
+    computes it for every frame it records. The bitstream is one integer,
+    the CRC goes a byte at a time after the stream's odd first bits, and the
+    stuff bits come from the runs of equal bits: a run of length L that
+    follows a stuff bit of its own value counts L + 1; every 5 of that
+    take one stuff bit, and a stuff bit right at the run's end joins the
+    next run."""
+    if not 0 <= dlc <= 8:
+        raise ValueError(f"dlc {dlc} over 8")
+    if not 0 <= can_id <= (EFF_MAX if eff else SFF_MAX):
+        raise ValueError(f"can_id {can_id:#x} out of range")
+    payload = b"" if rtr else bytes(data)
+    if len(payload) != (0 if rtr else dlc):
+        raise ValueError(f"{len(payload)} data bytes for dlc {dlc}")
+    if eff:     # SOF, base id, SRR, IDE, ext id, RTR, r1, r0, DLC: 39 bits
+        head = ((((can_id >> 18) << 2 | 3) << 18 | (can_id & 0x3FFFF)) << 3 | int(rtr) << 2) << 4 | dlc
+        n = 39
+    else:       # SOF, id, RTR, IDE, r0, DLC: 19 bits
+        head = ((can_id << 3) | int(rtr) << 2) << 4 | dlc
+        n = 19
+    body = head << 8 * len(payload) | int.from_bytes(payload, "big")
+    nbody = n + 8 * len(payload)
+    crc = 0
+    for i in range(nbody - 1, nbody - 1 - nbody % 8, -1):      # the odd bits first
+        if (body >> i & 1) ^ (crc >> 14):
+            crc = ((crc << 1) ^ CRC15_POLY) & 0x7FFF
+        else:
+            crc = (crc << 1) & 0x7FFF
+    for byte in (body & ((1 << (nbody - nbody % 8)) - 1)).to_bytes(nbody // 8, "big"):
+        crc = ((crc << 8) & 0x7FFF) ^ _CRC15_TABLE[((crc >> 7) ^ byte) & 0xFF]
+    value = body << 15 | crc
+    length = nbody + 15
+    stuff = carry = 0
+    for run in _RUNS.findall(format(value, f"0{length}b")):
+        e = len(run) + carry
+        stuff += e // 5
+        carry = 1 if e % 5 == 0 else 0
+    return length + stuff + TRAILER_BITS
 
 
 # --- the client ---------------------------------------------------------------

@@ -10,7 +10,7 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from servoamp.canlink import frame_bits
+from servoamp.canlink import TRAILER_BITS, frame_bits, frame_bitstream, stuff_count
 
 # x^15 + x^14 + x^10 + x^8 + x^7 + x^4 + x^3 + 1
 CRC15_DIVISOR = "1100010110011001"
@@ -105,6 +105,22 @@ def test_agrees_with_the_independent_bitstream(eff: bool, rtr: bool, dlc: int, d
     # at most one stuff bit per 4 bits after the first
     assert unstuffed + 13 <= n <= unstuffed + 13 + (unstuffed - 1) // 4
     assert n <= (160 if eff else 135)
+
+
+@settings(max_examples=600, deadline=None)
+@given(eff=st.booleans(), rtr=st.booleans(), dlc=st.integers(0, 8),
+       data=st.lists(st.sampled_from([0x00, 0xFF, 0x0F, 0xF0, 0x83, 0x7C]), min_size=8, max_size=8),
+       id_bits=st.sampled_from([0, 0x1FFFFFFF, 0x7FF, 0x1F, 0x3E0, 0x1FFC0000, 0x3FFFF]))
+def test_run_counting_equals_canlinks_bit_by_bit_count(eff: bool, rtr: bool, dlc: int, data: list[int],
+                                                       id_bits: int) -> None:
+    """frame_bits counts stuff bits from runs of equal bits (the bridge
+    calls it per frame); canlink's own bit-by-bit frame_bitstream and
+    stuff_count are the reference, on payloads and ids of long runs
+    (stuff bits at run ends, carried into the next run)."""
+    can_id = id_bits if eff else id_bits & 0x7FF
+    payload = b"" if rtr else bytes(data[:dlc])
+    bits = frame_bitstream(can_id, eff, rtr, dlc, payload)
+    assert frame_bits(can_id, eff, rtr, dlc, payload) == len(bits) + stuff_count(bits) + TRAILER_BITS
 
 
 def test_worst_case_bounds_are_the_known_ones() -> None:
