@@ -2,23 +2,83 @@
 /* amp_common.c - CRC, watchdog and record helpers used by both sides. */
 #include "amp_internal.h"
 
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
+#error "amp_lib: the region is little-endian, and the payload copies assume the cores are too"
+#endif
+
+/*
+ * CRC-32 (IEEE 802.3, reflected, the one zlib computes), a word at a time:
+ * a 32-bit little-endian word w of the data is its 4 bytes in order, and
+ * the reflected register takes them lowest byte first, so "register ^= w,
+ * then 32 bit steps" is the same as 4 bytes of "register ^= byte, then 8
+ * bit steps". The register is kept inverted between the steps (the
+ * caller's ~ at the start and at the end).
+ */
+#if AMP_CFG_CRC_SLICE4
+#include "amp_crc32_tables.h"
+
+static inline uint32_t crc_word(uint32_t c, uint32_t w)
+{
+	c ^= w;
+	return amp__crc32_t[3][c & 0xffu] ^ amp__crc32_t[2][(c >> 8) & 0xffu] ^
+	       amp__crc32_t[1][(c >> 16) & 0xffu] ^ amp__crc32_t[0][c >> 24];
+}
+
+static inline uint32_t crc_byte(uint32_t c, uint32_t b)
+{
+	return (c >> 8) ^ amp__crc32_t[0][(c ^ b) & 0xffu];
+}
+#else
+/* Nibble table: 64 bytes instead of 4 KiB (the firmware's code budget). */
+static const uint32_t crc_nib_t[16] = {
+	0x00000000u, 0x1db71064u, 0x3b6e20c8u, 0x26d930acu,
+	0x76dc4190u, 0x6b6b51f4u, 0x4db26158u, 0x5005713cu,
+	0xedb88320u, 0xf00f9344u, 0xd6d6a3e8u, 0xcb61b38cu,
+	0x9b64c2b0u, 0x86d3d2d4u, 0xa00ae278u, 0xbdbdf21cu,
+};
+
+static inline uint32_t crc_steps(uint32_t c, uint32_t nibbles)
+{
+	while (nibbles--)
+		c = (c >> 4) ^ crc_nib_t[c & 15u];
+	return c;
+}
+
+static inline uint32_t crc_word(uint32_t c, uint32_t w)
+{
+	return crc_steps(c ^ w, 8u);
+}
+
+static inline uint32_t crc_byte(uint32_t c, uint32_t b)
+{
+	return crc_steps(c ^ b, 2u);
+}
+#endif
+
+/* 4 bytes of private memory as a little-endian word, and back (any
+ * alignment: the compiler makes one load or store of it) */
+static inline uint32_t ld_le(const uint8_t *p)
+{
+	uint32_t w;
+
+	__builtin_memcpy(&w, p, 4u);
+	return w;
+}
+
+static inline void st_le(uint8_t *p, uint32_t w)
+{
+	__builtin_memcpy(p, &w, 4u);
+}
+
 uint32_t amp_crc32(uint32_t crc, const void *data, uint32_t len)
 {
-	/* Nibble table: 64 bytes instead of 1 KiB, fine for the mailbox. */
-	static const uint32_t t[16] = {
-		0x00000000u, 0x1db71064u, 0x3b6e20c8u, 0x26d930acu,
-		0x76dc4190u, 0x6b6b51f4u, 0x4db26158u, 0x5005713cu,
-		0xedb88320u, 0xf00f9344u, 0xd6d6a3e8u, 0xcb61b38cu,
-		0x9b64c2b0u, 0x86d3d2d4u, 0xa00ae278u, 0xbdbdf21cu,
-	};
 	const uint8_t *p = data;	/* private memory only: never OCM */
 
 	crc = ~crc;
-	while (len--) {
-		crc ^= *p++;
-		crc = (crc >> 4) ^ t[crc & 15u];
-		crc = (crc >> 4) ^ t[crc & 15u];
-	}
+	for (; len >= 4u; len -= 4u, p += 4)
+		crc = crc_word(crc, ld_le(p));
+	while (len--)
+		crc = crc_byte(crc, *p++);
 	return ~crc;
 }
 
@@ -55,145 +115,36 @@ void amp__copy_out(void *ocm_dst, const void *src, uint32_t bytes)
 	AMP_PORT_CACHE_CLEAN(ocm_dst, bytes);
 }
 
-void amp__rec_write(void *ocm_rec, const void *src, uint32_t words,
-		    uint32_t end, uint32_t seq)
-{
-	uint32_t *d = ocm_rec;
-	const uint32_t *s = src;
-
-	WR(&d[0], seq);
-	AMP_PORT_CACHE_CLEAN(d, 4u);
-	AMP_PORT_WMB();
-	for (uint32_t i = 1; i < words; i++)
-		if (i != end)
-			WR(&d[i], s[i]);
-	AMP_PORT_CACHE_CLEAN(d, words * 4u);
-	AMP_PORT_WMB();
-	WR(&d[end], seq);
-	AMP_PORT_CACHE_CLEAN(&d[end], 4u);
-	/* the caller publishes seq with a release store */
-}
-
-int amp__rec_read(void *dst, const void *ocm_rec, uint32_t words,
-		  uint32_t end, uint32_t seq)
-{
-	uint32_t *d = dst;
-	const uint32_t *s = ocm_rec;
-	uint32_t e, b;
-
-	AMP_PORT_CACHE_INVAL(s, words * 4u);
-	e = RD(&s[end]);
-	AMP_PORT_RMB();
-	for (uint32_t i = 1; i < words; i++)
-		if (i != end)
-			d[i] = RD(&s[i]);
-	AMP_PORT_RMB();
-	AMP_PORT_CACHE_INVAL(s, 4u);
-	b = RD(&s[0]);
-	d[0] = b;
-	d[end] = e;
-	return (b == e && e == seq) ? 0 : -1;
-}
-
-uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed)
-{
-	int32_t d = (int32_t)(pub - last);
-
-	*missed = 0;
-	if (d == 0)
-		return AMP_RX_STALE;
-	if (d < 0)
-		return AMP_RX_INVALID;	/* went backwards: reordered */
-	if (d == 1)
-		return AMP_RX_FRESH;
-	*missed = (uint32_t)d - 1u;
-	return AMP_RX_MISSED;
-}
-
-static int words_equal(const uint32_t *a, const uint32_t *b, uint32_t words)
-{
-	for (uint32_t i = 0; i < words; i++)
-		if (a[i] != b[i])
-			return 0;
-	return 1;
-}
-
-int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
-		   uint32_t naxes_word, uint32_t pub, uint32_t last, uint32_t epoch,
-		   uint32_t *resync, const void *held, struct amp_rx_info *rx,
-		   struct amp_stats *st)
-{
-	const uint32_t *rec = (const uint32_t *)bufs + (pub & 1u) * words;
-	const uint32_t *t = tmp;
-	int take = 0;
-
-	rx->status = amp__rx_classify(pub, last, &rx->missed);
-	/* Resynchronising (the peer attached anew): its sequence owes
-	 * nothing to the last one read, so the published one names the
-	 * record to check, ahead, behind or even equal, and its distance
-	 * is no count of skipped records. */
-	if (*resync) {
-		rx->status = AMP_RX_FRESH;
-		rx->missed = 0;
-	}
-	if (rx->status == AMP_RX_FRESH || rx->status == AMP_RX_MISSED) {
-		if (amp__rec_read(tmp, rec, words, end, pub) != 0)
-			rx->status = AMP_RX_TORN;
-		else if (t[1] != epoch || t[naxes_word] > AMP_MAX_AXES)
-			rx->status = AMP_RX_INVALID;
-		else if (held && words_equal(t, held, words))
-			/* word for word the record the reader holds, read again
-			 * while resynchronising (the attach seen a cycle after
-			 * its first record was taken, or attach_count hit by a
-			 * stray write): nothing new. (Without resynchronising
-			 * pub != last here, so the sequence words differ and
-			 * this stops at word 0.) */
-			rx->status = AMP_RX_STALE;
-		else
-			take = 1;
-		if (!take) {
-			rx->missed = 0;
-			/* the last sequence read, not yet rewritten: nothing new */
-			if (pub == last)
-				rx->status = AMP_RX_STALE;
-		}
-	}
-	if (take)
-		*resync = 0;
-	rx->seq = take ? pub : last;
-	switch (rx->status) {
-	case AMP_RX_FRESH: st->fresh++; break;
-	case AMP_RX_MISSED: st->fresh++; st->missed += rx->missed; break;
-	case AMP_RX_STALE: st->stale++; break;
-	case AMP_RX_TORN: st->torn++; break;
-	default: st->invalid++; break;
-	}
-	return take;
-}
-
-void amp__bytes_in(void *dst, const void *ocm_src, uint32_t len)
+/*
+ * Mailbox payloads to and from OCM: one 32-bit access per word of OCM, the
+ * bytes in little-endian order (a whole word through the compiler's 4-byte
+ * copy, any alignment of the private buffer), the last partial word byte
+ * by byte.
+ */
+static void payload_in(void *dst, const void *ocm_src, uint32_t len)
 {
 	uint8_t *d = dst;
 	const uint32_t *s = ocm_src;
+	uint32_t i = 0, w;
 
 	AMP_PORT_CACHE_INVAL(ocm_src, len);
-	for (uint32_t i = 0; i < len; i += 4u) {
-		uint32_t w = RD(&s[i / 4u]);
-
-		for (uint32_t b = 0; b < 4u && i + b < len; b++)
-			d[i + b] = (uint8_t)(w >> (8u * b));
-	}
+	for (; i + 4u <= len; i += 4u)
+		st_le(&d[i], RD(&s[i / 4u]));
+	if (i < len)
+		for (w = RD(&s[i / 4u]); i < len; i++, w >>= 8)
+			d[i] = (uint8_t)w;
 }
 
-void amp__bytes_out(void *ocm_dst, const void *src, uint32_t len)
+static void payload_out(void *ocm_dst, const void *src, uint32_t len)
 {
 	uint32_t *d = ocm_dst;
 	const uint8_t *s = src;
+	uint32_t i = 0, w = 0;
 
-	for (uint32_t i = 0; i < len; i += 4u) {
-		uint32_t w = 0;
-
-		for (uint32_t b = 0; b < 4u && i + b < len; b++)
+	for (; i + 4u <= len; i += 4u)
+		WR(&d[i / 4u], ld_le(&s[i]));
+	if (i < len) {
+		for (uint32_t b = 0; i + b < len; b++)
 			w |= (uint32_t)s[i + b] << (8u * b);
 		WR(&d[i / 4u], w);
 	}
@@ -221,7 +172,7 @@ int amp__frame_recv(struct amp_frame_hdr *h, void *payload, uint32_t cap,
 		return AMP_E_PROTO;
 	if (h->length > cap)
 		return AMP_E_NOSPC;
-	amp__bytes_in(payload, f->payload, h->length);
+	payload_in(payload, f->payload, h->length);
 	return frame_crc(h, payload) == h->crc32 ? AMP_OK : AMP_E_PROTO;
 }
 
@@ -231,7 +182,7 @@ void amp__frame_put(struct amp_frame *f, struct amp_frame_hdr *h,
 	h->magic = AMP_FRAME_MAGIC;
 	h->version = AMP_OCM_VERSION;
 	h->crc32 = frame_crc(h, payload);
-	amp__bytes_out(f->payload, payload, h->length);
+	payload_out(f->payload, payload, h->length);
 	amp__copy_out(&f->hdr, h, sizeof(*h));
 }
 

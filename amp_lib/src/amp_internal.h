@@ -17,65 +17,47 @@
 void amp__copy_in(void *dst, const void *ocm_src, uint32_t bytes);
 void amp__copy_out(void *ocm_dst, const void *src, uint32_t bytes);
 
-/* Byte payloads to/from OCM with whole-word accesses (little-endian). */
-void amp__bytes_in(void *dst, const void *ocm_src, uint32_t len);
-void amp__bytes_out(void *ocm_dst, const void *src, uint32_t len);
-
 /*
  * Receive a frame: copy its header into h and its payload into payload (cap
  * bytes available) once each, and validate the copies (magic, version,
  * epoch, length, CRC). AMP_OK, AMP_E_PROTO, or AMP_E_NOSPC (length > cap).
+ * The payload is copied a word at a time (one 32-bit load of OCM each),
+ * and the CRC computed on each copied word in the same pass.
  */
 int amp__frame_recv(struct amp_frame_hdr *h, void *payload, uint32_t cap,
 		    const struct amp_frame *f, uint32_t epoch);
-/* Write a frame (header + payload) to OCM; header fields in h. */
+/* Write a frame (payload, then header) to OCM; header fields in h, its
+ * crc32 computed in the pass that writes the payload. */
 void amp__frame_put(struct amp_frame *f, struct amp_frame_hdr *h,
 		    const void *payload);
 
 #define AMP_REC_WORDS(type) ((uint32_t)(sizeof(type) / 4u))
 #define AMP_REC_END(type)   ((uint32_t)(offsetof(type, seq_end) / 4u))
 #define AMP_REC_NAXES(type) ((uint32_t)(offsetof(type, n_axes) / 4u))
+#define AMP_REC_W(type, f)  ((uint32_t)(offsetof(type, f) / 4u))
+
+/* Both records: 8 header words (seq_begin first), the axis slots, seq_end. */
+#define AMP_REC_HDR_WORDS 8u
+_Static_assert(offsetof(struct amp_cmd_record, axis) == 4u * AMP_REC_HDR_WORDS, "cmd header");
+_Static_assert(offsetof(struct amp_fb_record, axis) == 4u * AMP_REC_HDR_WORDS, "fb header");
 
 #define FB_WORDS  AMP_REC_WORDS(struct amp_fb_record)
 #define FB_END    AMP_REC_END(struct amp_fb_record)
 #define FB_NAXES  AMP_REC_NAXES(struct amp_fb_record)
+#define FB_SLOT   ((uint32_t)(sizeof(struct amp_fb_axis) / 4u))
 #define CMD_WORDS AMP_REC_WORDS(struct amp_cmd_record)
 #define CMD_END   AMP_REC_END(struct amp_cmd_record)
 #define CMD_NAXES AMP_REC_NAXES(struct amp_cmd_record)
+#define CMD_SLOT  ((uint32_t)(sizeof(struct amp_cmd_axis) / 4u))
+#define AMP_REC_MAX_END (FB_END > CMD_END ? FB_END : CMD_END)
 
-/*
- * Double-buffered record write/read. words = record size in 32-bit
- * words, end = index of seq_end. The reader returns 0 if the copy in dst
- * is whole and carries sequence seq, -1 if it was torn.
- */
-void amp__rec_write(void *ocm_rec, const void *src, uint32_t words,
-		    uint32_t end, uint32_t seq);
-int amp__rec_read(void *dst, const void *ocm_rec, uint32_t words,
-		  uint32_t end, uint32_t seq);
 
-/* Classify a published sequence against the last one read. */
-uint32_t amp__rx_classify(uint32_t pub, uint32_t last, uint32_t *missed);
 
-/*
- * The reader's step for a periodic record: classify pub against last,
- * copy the record (buffer pub & 1 of the pair at bufs) into tmp, check it
- * is whole, of this epoch (word 1) and with an axis count (word
- * naxes_word) within AMP_MAX_AXES; fill rx and count the outcome in st.
- * With *resync set (the peer attached anew) the record pub names is
- * checked whatever pub is, last included, and taken as FRESH (missed 0)
- * if whole and valid (an unacceptable record at pub == last is STALE:
- * nothing new yet); *resync is cleared once a record is taken. A copy
- * equal word for word to *held (the record the reader took last; NULL:
- * no such check) is STALE, not taken. Returns 1 if tmp holds a new record
- * the caller must take, else 0.
- */
-int amp__rx_record(void *tmp, const void *bufs, uint32_t words, uint32_t end,
-		   uint32_t naxes_word, uint32_t pub, uint32_t last, uint32_t epoch,
-		   uint32_t *resync, const void *held, struct amp_rx_info *rx,
-		   struct amp_stats *st);
 
 /* Wait until *word == value, at most timeout ticks. 0 or AMP_E_TIMEOUT. */
 int amp__wait_word(const uint32_t *word, uint32_t value, amp_ticks_t timeout);
+
+#include "amp_record.h"
 
 static inline uint32_t amp__ncopy(uint32_t n)
 {

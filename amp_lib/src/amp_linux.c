@@ -151,14 +151,12 @@ static void check_attach(struct amp_linux *l, int peer)
 static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx)
 {
 	struct amp_ocm *o = l->ocm;
-	struct amp_fb_record f;
 	uint32_t pub;
 
 	AMP_PORT_CACHE_INVAL(&o->servo_line, sizeof(o->servo_line));
 	pub = RD_ACQ(&o->servo_line.fb_pub);
-	if (amp__rx_record(&f, o->fb, FB_WORDS, FB_END, FB_NAXES, pub, l->fb_seq,
-			   l->epoch, &l->fb_resync, &l->fb, rx, &l->st)) {
-		l->fb = f;
+	if (amp__rx_record(&l->fb, 1, o->fb, FB_WORDS, FB_END, FB_NAXES, FB_SLOT, pub,
+			   l->fb_seq, l->epoch, &l->fb_resync, rx, &l->st)) {
 		l->fb_seq = pub;
 		l->fb_bad = 0;
 	} else if (rx->status == AMP_RX_INVALID || rx->status == AMP_RX_TORN || l->fb_bad) {
@@ -174,7 +172,7 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 		    uint32_t n_axes, uint32_t flags, struct amp_rx_info *rx)
 {
 	struct amp_rx_info tmp;
-	struct amp_cmd_record c = { 0 };
+	uint32_t h[AMP_REC_HDR_WORDS];	/* words 1..7, each set below */
 	struct amp_ocm *o;
 	uint32_t seq, sem;
 	int peer;
@@ -203,14 +201,17 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	read_feedback(l, rx);
 
 	/* 4. switch the command buffer: write and publish */
-	c.epoch = l->epoch;
-	c.cycle = l->cycle;
-	c.n_axes = n_axes;
-	c.flags = flags;
-	for (uint32_t i = 0; i < n_axes; i++)
-		c.axis[i] = axes[i];
+	/* (the record's header, then the caller's n_axes slots straight to
+	 * OCM: no record built in private memory first) */
+	h[AMP_REC_W(struct amp_cmd_record, epoch)] = l->epoch;
+	h[AMP_REC_W(struct amp_cmd_record, cycle)] = l->cycle;
+	h[CMD_NAXES] = n_axes;
+	h[AMP_REC_W(struct amp_cmd_record, flags)] = flags;
+	h[AMP_REC_W(struct amp_cmd_record, reserved[0])] = 0;
+	h[AMP_REC_W(struct amp_cmd_record, reserved[1])] = 0;
+	h[AMP_REC_W(struct amp_cmd_record, reserved[2])] = 0;
 	seq = l->cmd_seq + 1u;
-	amp__rec_write(&o->cmd[seq & 1u], &c, CMD_WORDS, CMD_END, seq);
+	amp__rec_write(&o->cmd[seq & 1u], h, axes, n_axes * CMD_SLOT, CMD_END, seq);
 
 	/* 5. set the semaphore if the token is ours (idle), THEN publish the
 	 * sequence: a servo that sees the new sequence always finds the

@@ -103,9 +103,8 @@ void amp_servo_set_state(struct amp_servo *s, uint32_t state, uint32_t fault)
 int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_info *rx)
 {
 	struct amp_ocm *o = s->ocm;
-	struct amp_cmd_record c;
-	amp_ticks_t t0 = amp_port_ticks();
-	uint32_t pub;
+	amp_ticks_t t0 = 0;
+	uint32_t pub, polls = 0;
 	int wd;
 
 	/* 1. the cycle is counted (the caller has cleared its interrupt
@@ -133,17 +132,20 @@ int amp_servo_cycle_rx(struct amp_servo *s, amp_ticks_t timeout, struct amp_rx_i
 		pub = RD_ACQ(&o->linux_line.cmd_pub);
 		if (pub != s->cmd_seq || RD_ACQ(&o->cyc_sem.sem) == AMP_SEM_BUSY)
 			break;
-		if ((amp_ticks_t)(amp_port_ticks() - t0) >= timeout)
+		/* the clock is read only when there is something to wait for */
+		if (timeout == 0)
+			break;
+		if (polls++ == 0)
+			t0 = amp_port_ticks();
+		else if ((amp_ticks_t)(amp_port_ticks() - t0) >= timeout)
 			break;
 		AMP_PORT_RELAX();
 	}
 
 	/* 3. switch the command buffer: read the newest commands */
-	if (amp__rx_record(&c, o->cmd, CMD_WORDS, CMD_END, CMD_NAXES, pub, s->cmd_seq,
-			   s->epoch, &s->cmd_resync, 0, rx, &s->st)) {
-		s->cmd = c;
+	if (amp__rx_record(&s->cmd, 0, o->cmd, CMD_WORDS, CMD_END, CMD_NAXES, CMD_SLOT,
+			   pub, s->cmd_seq, s->epoch, &s->cmd_resync, rx, &s->st))
 		s->cmd_seq = pub;
-	}
 	if (rx->status != AMP_RX_FRESH) {
 		WR(&o->servo_line.cmd_stale, s->st.stale + s->st.torn + s->st.invalid);
 		WR(&o->servo_line.cmd_missed, s->st.missed);
@@ -155,25 +157,25 @@ int amp_servo_cycle_tx(struct amp_servo *s, const struct amp_fb_axis *axes,
 		       uint32_t n_axes, uint32_t t_cycle, uint32_t irq_latency)
 {
 	struct amp_ocm *o = s->ocm;
-	struct amp_fb_record f = { 0 };
+	uint32_t h[AMP_REC_HDR_WORDS];	/* words 1..7, each set below (no memset) */
 	uint32_t seq;
 
 	if (n_axes > AMP_MAX_AXES || (n_axes && !axes))
 		return AMP_E_INVAL;
 	/* 4. switch the response buffer: write and publish the feedback */
-	f.epoch = s->epoch;
+	/* (the record's header, then the caller's n_axes slots straight to
+	 * OCM: no record built in private memory first) */
+	h[AMP_REC_W(struct amp_fb_record, epoch)] = s->epoch;
 	/* the last commands this servo took: none yet since its attach is 0,
 	 * not the cmd_pub it found there (commands it never took) */
-	f.cmd_seq = s->cmd_resync ? 0u : s->cmd_seq;
-	f.cycle = s->cycle;
-	f.t_cycle = t_cycle;
-	f.irq_latency = irq_latency;
-	f.n_axes = n_axes;
-	f.status = RD(&o->servo_line.state);
-	for (uint32_t i = 0; i < n_axes; i++)
-		f.axis[i] = axes[i];
+	h[AMP_REC_W(struct amp_fb_record, cmd_seq)] = s->cmd_resync ? 0u : s->cmd_seq;
+	h[AMP_REC_W(struct amp_fb_record, cycle)] = s->cycle;
+	h[AMP_REC_W(struct amp_fb_record, t_cycle)] = t_cycle;
+	h[AMP_REC_W(struct amp_fb_record, irq_latency)] = irq_latency;
+	h[FB_NAXES] = n_axes;
+	h[AMP_REC_W(struct amp_fb_record, status)] = RD(&o->servo_line.state);
 	seq = s->fb_seq + 1u;
-	amp__rec_write(&o->fb[seq & 1u], &f, FB_WORDS, FB_END, seq);
+	amp__rec_write(&o->fb[seq & 1u], h, axes, n_axes * FB_SLOT, FB_END, seq);
 	WR(&o->servo_line.heartbeat, ++s->heartbeat);
 	WR_REL(&o->servo_line.fb_pub, seq);
 	AMP_PORT_CACHE_CLEAN(&o->servo_line, sizeof(o->servo_line));

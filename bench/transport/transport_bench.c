@@ -13,7 +13,7 @@
  * itself moves several-fold between runs on a shared machine: the ratio
  * a/c is taken per block pair, and its median and spread over the blocks
  * are reported. (b), (d) and (e) run once each afterwards.
- * Prints p50/p99/p99.9/max in ns and the ratios a/c, b/c, d/a, and writes
+ * Prints p50/p99/p99.9/max in ns and the ratios a/c, b/c, b512/b16, d/a, and writes
  * them as JSON (bench/README.md: "figures" schema) to the path given with
  * --json.
  *
@@ -543,10 +543,11 @@ int main(int argc, char **argv)
 	double bc50 = (double)r[1].p50 / (double)r[2].p50;
 	double b512c50 = (double)r[5].p50 / (double)r[2].p50;
 	double da50 = (double)r[3].p50 / (double)r[0].p50;
+	double b512b16 = (double)r[5].p50 / (double)r[1].p50;
 
 	printf("ratios: a/c p50 %.2f (median of blocks; pooled %.2f), a/c p99.9 %.2f (median of "
-	       "blocks; pooled %.2f), b16/c p50 %.2f, d/a p50 %.1f\n",
-	       blk.s50.median, ac50, blk.s999.median, ac999, bc50, da50);
+	       "blocks; pooled %.2f), b16/c p50 %.2f, b512/b16 p50 %.2f, d/a p50 %.1f\n",
+	       blk.s50.median, ac50, blk.s999.median, ac999, bc50, b512b16, da50);
 	if (json) {
 		char note50[160], note999[160];
 
@@ -565,8 +566,9 @@ int main(int argc, char **argv)
 				", \"p99_9\": %" PRIu64 ", \"max\": %" PRIu64 "}%s\n", keys[i],
 				r[i].p50, r[i].p99, r[i].p999, r[i].max, i < 5 ? "," : "");
 		fprintf(f, "  },\n  \"ratios\": {\"a_over_c_p50\": %.3f, \"a_over_c_p99_9\": %.3f, "
-			"\"b16_over_c_p50\": %.3f, \"b512_over_c_p50\": %.3f, \"d_over_a_p50\": %.3f},\n",
-			ac50, ac999, bc50, b512c50, da50);
+			"\"b16_over_c_p50\": %.3f, \"b512_over_c_p50\": %.3f, \"b512_over_b16_p50\": %.3f, "
+			"\"d_over_a_p50\": %.3f},\n",
+			ac50, ac999, bc50, b512c50, b512b16, da50);
 		fprintf(f, "  \"blocks\": {\n    \"pairs\": %ld,\n    \"round_trips_per_block\": %ld,\n"
 			"    \"warmup_per_block\": %ld,\n    \"order\": \"a then c in every pair\",\n",
 			n_blocks, n_iters / n_blocks, BLOCK_WARMUP);
@@ -585,6 +587,8 @@ int main(int argc, char **argv)
 		json_figure(f, "a_over_c_p99_9", blk.s999.median, "x", "lower", &blk.s999, note999, 0);
 		json_figure(f, "d_over_a_p50", da50, "x", "higher", NULL, NULL, 0);
 		json_figure(f, "b16_over_c_p50", bc50, "x", "lower", NULL, NULL, 0);
+		json_figure(f, "b512_over_b16_p50", b512b16, "x", "lower", NULL,
+			    "the 512-byte mailbox round trip over the 16-byte one", 0);
 		json_figure(f, "a_periodic_p50", (double)r[0].p50, "ns", "lower", NULL,
 			    "pooled over the blocks", 0);
 		json_figure(f, "c_floor_p50", (double)r[2].p50, "ns", "lower", &blk.sc50,

@@ -59,7 +59,8 @@ class Bench:
 
 
 BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
-    Bench("transport", "amp_lib exchange vs cache-line floor (alternating blocks), mailbox, eventfd, pipe",
+    Bench("transport", "amp_lib exchange vs cache-line floor (alternating blocks), mailbox 16 and 512 B "
+          "(and their ratio), eventfd, pipe",
           False, "1-2 min (eventfd, pipe and the mailbox dominate; 5 min with stress-ng)",
           (("make", "-s", "-C", "amp_lib", "bench"),),
           ("build/amp_lib/none/transport_bench", "--iters", "200000", "--blocks", "20", "--json", "{json}"),

@@ -119,6 +119,22 @@ def test_stress_rejects_bad_parameters(build_none: Path) -> None:
     assert proc.returncode == 2 and "bad parameters" in proc.stderr
 
 
+def test_unit_with_the_firmware_crc(tmp_path: Path) -> None:
+    """The unit test (CRC against its bit-at-a-time definition, mailbox
+    frames) with the CRC the firmware builds (AMP_CFG_CRC_SLICE4=0, the
+    nibble table) on the host: both ways give the same CRC."""
+    exe = tmp_path / "test_amp_unit_nibble"
+    sources = [str(TOP / "amp_lib" / "src" / s)
+               for s in ("amp_common.c", "amp_linux.c", "amp_servo.c", "amp_strerror.c")]
+    subprocess.run(["cc", "-std=c11", "-Wall", "-Wextra", "-Werror", "-Wpedantic", "-O2",
+                    "-D_POSIX_C_SOURCE=200809L", "-DAMP_CFG_CRC_SLICE4=0",
+                    f"-I{TOP}/amp_lib/include", f"-I{TOP}/amp_lib/src", f"-I{TOP}/amp_lib/port/posix",
+                    f"-I{TOP}/tests/amp_lib", str(TOP / "tests" / "amp_lib" / "test_amp_unit.c"),
+                    *sources, "-o", str(exe)], check=True, timeout=120)
+    out = _run([str(exe)], timeout=120)
+    assert " 0 failed" in out, out
+
+
 @pytest.mark.parametrize("cc,port,flags", [
     ("arm-linux-gnueabihf-gcc", "linux", ["-D_POSIX_C_SOURCE=200809L", "-mcpu=cortex-a9"]),
     ("cc", "linux", ["-D_POSIX_C_SOURCE=200809L"]),

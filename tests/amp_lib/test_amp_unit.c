@@ -39,6 +39,35 @@ static void test_crc(void)
 	CHECK_EQ(amp_crc32(0, "", 0), 0);
 	/* continuation equals one pass */
 	CHECK_EQ(amp_crc32(amp_crc32(0, "1234", 4), "56789", 5), 0xcbf43926u);
+
+	/* a word at a time (either table: AMP_CFG_CRC_SLICE4) equals the
+	 * bit-at-a-time definition, at every alignment and for every length
+	 * up to 64 bytes, split anywhere */
+	{
+		static uint8_t buf[64 + 3];
+		uint32_t x = 2463534242u;
+
+		for (uint32_t i = 0; i < sizeof(buf); i++) {
+			x ^= x << 13;
+			x ^= x >> 17;
+			x ^= x << 5;
+			buf[i] = (uint8_t)x;
+		}
+		for (uint32_t off = 0; off < 4u; off++)
+			for (uint32_t len = 0; len <= 64u; len++) {
+				uint32_t ref = 0xffffffffu, split = len / 3u;
+
+				for (uint32_t i = 0; i < len; i++) {
+					ref ^= buf[off + i];
+					for (int b = 0; b < 8; b++)
+						ref = (ref >> 1) ^ (0xedb88320u & (0u - (ref & 1u)));
+				}
+				ref = ~ref;
+				CHECK_EQ(amp_crc32(0, buf + off, len), ref);
+				CHECK_EQ(amp_crc32(amp_crc32(0, buf + off, split), buf + off + split,
+						   len - split), ref);
+			}
+	}
 }
 
 static void test_strerror(void)

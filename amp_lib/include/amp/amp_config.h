@@ -32,6 +32,24 @@
 #define AMP_CFG_OCM_CACHED 0
 #endif
 
+/*
+ * How amp_lib computes the CRC-32 of the header and the mailbox frames (the
+ * same CRC either way, bit for bit: only speed and size differ).
+ * 1: slicing-by-4, four 256-entry tables (4 KiB of read-only data), one
+ *    word of a frame in 4 table loads; 0: a 16-entry nibble table (64 B),
+ *    8 dependent steps per word, for the servo firmware's 2 KiB code budget.
+ * Default: 1 in a hosted build (Linux userspace, the host tests), 0 in a
+ * freestanding one (the firmware is built with -ffreestanding). The one
+ * option the two sides may set differently: the CRC is the same.
+ */
+#ifndef AMP_CFG_CRC_SLICE4
+#if __STDC_HOSTED__
+#define AMP_CFG_CRC_SLICE4 1
+#else
+#define AMP_CFG_CRC_SLICE4 0
+#endif
+#endif
+
 /* Default watchdog limit, in cycles without a peer heartbeat. */
 #ifndef AMP_WD_LIMIT_DEFAULT
 #define AMP_WD_LIMIT_DEFAULT 10

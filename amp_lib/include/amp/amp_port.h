@@ -11,7 +11,11 @@
  *   AMP_PORT_RMB(), AMP_PORT_WMB()  optional: load-load / store-store
  *                               ordering only (default: AMP_PORT_MB)
  *   AMP_PORT_LOAD_ACQ(p)        optional: load + RMB (semaphores, sequences)
- *   AMP_PORT_STORE_REL(p, v)    optional: MB + store + WMB
+ *   AMP_PORT_STORE_REL(p, v)    optional: MB + store (everything before
+ *                               it, loads and stores, is ordered before
+ *                               the store; nothing after it needs to be:
+ *                               docs/amp-protocol.md section 8 pairs
+ *                               each barrier)
  *   AMP_PORT_CACHE_CLEAN(a, n)  write back lines [a, a+n) (if cached)
  *   AMP_PORT_CACHE_INVAL(a, n)  discard lines [a, a+n) (if cached)
  *   AMP_PORT_RELAX()            pause inside a polling loop
@@ -52,7 +56,11 @@ static inline uint32_t amp_port__load_acq(const uint32_t *p)
 #endif
 
 #ifndef AMP_PORT_STORE_REL
-#define AMP_PORT_STORE_REL(p, v) do { AMP_PORT_MB(); AMP_PORT_STORE32((p), (v)); AMP_PORT_WMB(); } while (0)
+/* No barrier after the store: no step of amp_lib orders a later access
+ * after a release store (the next release store's own MB orders it before
+ * that one, which is all the protocol needs). On ARMv7 this is one DMB per
+ * release store instead of two. */
+#define AMP_PORT_STORE_REL(p, v) do { AMP_PORT_MB(); AMP_PORT_STORE32((p), (v)); } while (0)
 #endif
 
 #ifndef AMP_PORT_SIGNAL
