@@ -79,6 +79,7 @@ int amp_servo_attach(struct amp_servo *s, void *base, uint32_t size)
 	WR(&sl->fault, 0);
 	WR(&sl->cmd_stale, 0);
 	WR(&sl->cmd_missed, 0);
+	s->state = AMP_SSTATE_RUNNING;
 	WR(&sl->state, AMP_SSTATE_RUNNING);
 	WR_REL(&sl->epoch, h.epoch);
 	AMP_PORT_CACHE_CLEAN(sl, sizeof(*sl));
@@ -95,6 +96,7 @@ void amp_servo_set_state(struct amp_servo *s, uint32_t state, uint32_t fault)
 {
 	struct amp_servo_line *sl = &s->ocm->servo_line;
 
+	s->state = state;
 	WR(&sl->fault, fault);
 	WR_REL(&sl->state, state);
 	AMP_PORT_CACHE_CLEAN(sl, sizeof(*sl));
@@ -173,7 +175,10 @@ int amp_servo_cycle_tx(struct amp_servo *s, const struct amp_fb_axis *axes,
 	h[AMP_REC_W(struct amp_fb_record, t_cycle)] = t_cycle;
 	h[AMP_REC_W(struct amp_fb_record, irq_latency)] = irq_latency;
 	h[FB_NAXES] = n_axes;
-	h[AMP_REC_W(struct amp_fb_record, status)] = RD(&o->servo_line.state);
+	/* the state this servo last wrote, not read back from its line: a
+	 * read of the line that Linux's semaphore write just took away would
+	 * be one more cross-core transfer before the line is written below */
+	h[AMP_REC_W(struct amp_fb_record, status)] = s->state;
 	seq = s->fb_seq + 1u;
 	amp__rec_write(&o->fb[seq & 1u], h, axes, n_axes * FB_SLOT, FB_END, seq);
 	WR(&o->servo_line.heartbeat, ++s->heartbeat);

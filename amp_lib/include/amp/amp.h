@@ -213,6 +213,7 @@ struct amp_servo {
 	uint32_t mbox_state;	/* 0 idle, 1 request handed out */
 	uint32_t mbox_seq;
 	uint32_t mbox_cmd;
+	uint32_t state;		/* the servo line's state word as this servo last wrote it */
 	struct amp_watchdog wd;
 	struct amp_stats st;
 	struct amp_cmd_record cmd;	/* last whole commands */
