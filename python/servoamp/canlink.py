@@ -188,8 +188,10 @@ def _crc15(bits: list[int]) -> int:
     return crc
 
 
-def frame_bitstream(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) -> list[int]:
-    """The unstuffed bits from SOF to the last CRC bit (0 dominant)."""
+def _frame_payload(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) -> bytes:
+    """The data bits' bytes of a frame (none for a remote frame), its
+    fields checked: ValueError for a dlc over 8, an id over its range, or
+    data that is not dlc bytes."""
     if not 0 <= dlc <= 8:
         raise ValueError(f"dlc {dlc} over 8")
     if not 0 <= can_id <= (EFF_MAX if eff else SFF_MAX):
@@ -197,6 +199,12 @@ def frame_bitstream(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) ->
     payload = b"" if rtr else bytes(data)
     if len(payload) != (0 if rtr else dlc):
         raise ValueError(f"{len(payload)} data bytes for dlc {dlc}")
+    return payload
+
+
+def frame_bitstream(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) -> list[int]:
+    """The unstuffed bits from SOF to the last CRC bit (0 dominant)."""
+    payload = _frame_payload(can_id, eff, rtr, dlc, data)
     bits = [0]                                           # SOF
     if eff:
         bits += _bits(can_id >> 18, 11) + [1, 1]         # base id, SRR, IDE
@@ -253,13 +261,7 @@ def frame_bits(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) -> int:
     follows a stuff bit of its own value counts L + 1; every 5 of that
     take one stuff bit, and a stuff bit right at the run's end joins the
     next run."""
-    if not 0 <= dlc <= 8:
-        raise ValueError(f"dlc {dlc} over 8")
-    if not 0 <= can_id <= (EFF_MAX if eff else SFF_MAX):
-        raise ValueError(f"can_id {can_id:#x} out of range")
-    payload = b"" if rtr else bytes(data)
-    if len(payload) != (0 if rtr else dlc):
-        raise ValueError(f"{len(payload)} data bytes for dlc {dlc}")
+    payload = _frame_payload(can_id, eff, rtr, dlc, data)
     if eff:     # SOF, base id, SRR, IDE, ext id, RTR, r1, r0, DLC: 39 bits
         head = ((((can_id >> 18) << 2 | 3) << 18 | (can_id & 0x3FFFF)) << 3 | int(rtr) << 2) << 4 | dlc
         n = 39

@@ -36,7 +36,7 @@ import pytest
 from fieldbus_qemu import (CAN0, ISR_TXOK, R_ICR, R_ISR, R_MSR, R_SR, R_SRR, R_TXDLC, R_TXDW1,
                            R_TXDW2, R_TXID, SR_NORMAL, SRR_CEN, Board, GuestFrame, idr, qemu_binary)
 from servoamp import canlink
-from test_drives_on_qemu import Observer
+from test_drives_on_qemu import Observer, start_logger
 
 pytestmark = pytest.mark.board
 
@@ -66,19 +66,6 @@ def store(board: Board, can_id: int, data: bytes = b"") -> None:
     board.writel(CAN0 + R_TXDW2, int.from_bytes(raw[4:], "big"))
 
 
-def start_listener(sock: Path, out: Path, workdir: Path) -> subprocess.Popen[str]:
-    """python-can's logger as a canlink listener (held like an active
-    client, only whole frames), as netboard starts it."""
-    proc = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "servoamp", "-c", str(sock),
-                             "-f", str(out), "--bus-kwargs", "listen_only=true"], stdout=subprocess.PIPE,
-                            stderr=open(workdir / f"{out.name}.err", "w"), text=True, cwd=REPO,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    assert proc.stdout is not None
-    line = proc.stdout.readline()          # "Connected to ServoampBus: ..." once HELLO came back
-    assert "Connected to" in line and "listen-only" in line, line
-    return proc
-
-
 @pytest.fixture
 def rig(tmp_path: Path):  # type: ignore[no-untyped-def]
     board = Board(qemu_binary(), tmp_path)
@@ -100,7 +87,8 @@ def test_a_bus_short_takes_the_controller_bus_off_and_a_reset_brings_it_back(  #
     board, procs = rig
     observer = Observer(board.can_sock)
     asc = tmp_path / "bus.asc"
-    procs.append(start_listener(board.can_sock, asc, tmp_path))
+    # a listener: held like an active client, only whole frames (as netboard starts it)
+    procs.append(start_logger(board.can_sock, asc, tmp_path, "listen_only=true"))
     board.can_init()
     ctl = tmp_path / "drives.ctl"
     err = tmp_path / "drivesim.err"

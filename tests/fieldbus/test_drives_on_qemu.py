@@ -76,14 +76,19 @@ class Observer:
             self.bye.set()
 
 
-def start_logger(sock: Path, out: Path, workdir: Path) -> subprocess.Popen[str]:
+def start_logger(sock: Path, out: Path, workdir: Path, *bus_kwargs: str) -> subprocess.Popen[str]:
+    """python-can's logger on the bus (``bus_kwargs``: its --bus-kwargs,
+    e.g. listen_only=true), once connected."""
+    extra = ["--bus-kwargs", *bus_kwargs] if bus_kwargs else []
     proc = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "servoamp", "-c", str(sock),
-                             "-f", str(out)], stdout=subprocess.PIPE,
+                             "-f", str(out), *extra], stdout=subprocess.PIPE,
                             stderr=open(workdir / f"{out.name}.err", "w"), text=True, cwd=REPO,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
     assert proc.stdout is not None
     line = proc.stdout.readline()          # "Connected to ServoampBus: ..." once HELLO came back
     assert "Connected to" in line, line
+    if "listen_only=true" in bus_kwargs:
+        assert "listen-only" in line, line
     return proc
 
 
