@@ -42,26 +42,26 @@ _CONTROLLER_RE = re.compile(r"^stats canps=(\d+) " + " ".join(f"{f}=" + r"(\d+)"
                             + r"\r?$", re.M)
 
 
-def controller_stats(text: str, bus: int | None = None) -> list[dict[str, int]]:
-    """The CAN driver's ``stats canps=`` lines in ``text``, in order, as
-    dicts of CONTROLLER_FIELDS; only bus ``bus``'s if given."""
+def _stats_lines(rx: re.Pattern[str], fields: tuple[str, ...], text: str,
+                 bus: int | None) -> list[dict[str, int]]:
     out = []
-    for m in _CONTROLLER_RE.finditer(text):
-        d = dict(zip(CONTROLLER_FIELDS, map(int, m.groups())))
+    for m in rx.finditer(text):
+        d = dict(zip(fields, map(int, m.groups())))
         if bus is None or d["bus"] == bus:
             out.append(d)
     return out
+
+
+def controller_stats(text: str, bus: int | None = None) -> list[dict[str, int]]:
+    """The CAN driver's ``stats canps=`` lines in ``text``, in order, as
+    dicts of CONTROLLER_FIELDS; only bus ``bus``'s if given."""
+    return _stats_lines(_CONTROLLER_RE, CONTROLLER_FIELDS, text, bus)
 
 
 def master_stats(text: str, bus: int | None = None) -> list[dict[str, int]]:
     """The master's ``stats can=`` lines in ``text`` (a UART log, CR LF or
     LF), in order, as dicts of MASTER_FIELDS; only bus ``bus``'s if given."""
-    out = []
-    for m in _MASTER_RE.finditer(text):
-        d = dict(zip(MASTER_FIELDS, map(int, m.groups())))
-        if bus is None or d["bus"] == bus:
-            out.append(d)
-    return out
+    return _stats_lines(_MASTER_RE, MASTER_FIELDS, text, bus)
 
 
 @dataclass(frozen=True)
