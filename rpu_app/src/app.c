@@ -199,6 +199,18 @@ void app_param_apply(uint32_t id, uint32_t value)
 	irq_restore(flags);
 }
 
+void app_param_running(uint32_t id, uint32_t value)
+{
+	uint32_t flags;
+
+	if (id >= SP_P_COUNT)
+		return;
+	flags = irq_save();
+	pval[id] = value;
+	refresh();
+	irq_restore(flags);
+}
+
 void app_safestop(uint32_t reason)
 {
 	if (safestop)

@@ -49,5 +49,8 @@ extern volatile struct app_debug app_debug;
 uint32_t app_param(uint32_t id);
 int app_param_check(uint32_t id, uint32_t value);	/* SP_OK or SP_E_* */
 void app_param_apply(uint32_t id, uint32_t value);	/* background loop only */
+/* At start: the value already in force (cycle_period_us: the period the
+ * cycle timer runs at), taken without applying it. */
+void app_param_running(uint32_t id, uint32_t value);
 
 #endif

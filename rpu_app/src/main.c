@@ -13,6 +13,7 @@
 #include "arch.h"
 #include "board.h"
 #if HAVE_AMP_LIB
+#include "app.h"
 #include "axis.h"
 #endif
 #include "gic.h"
@@ -230,7 +231,7 @@ static int stop_requested(void)
 __attribute__((noreturn)) void servo_quiesce_and_park(void)
 {
 	cpu_irq_disable();
-	ttc_cycle_stop();
+	ttc_servo_stop();	/* Linux's cycle goes on (ttc.c) */
 	idle_timer_stop();
 #if HAVE_AMP_LIB
 	if (axis_can_count())
@@ -293,7 +294,7 @@ static void banner(void)
 
 __attribute__((noreturn)) void servo_main(void)
 {
-	uint32_t gt_ps, last_stats = 0, slept_taken = 0;
+	uint32_t gt_ps, last_stats = 0, slept_taken = 0, period_us;
 	int uart_ok;
 
 	cycles = 0;
@@ -351,8 +352,20 @@ __attribute__((noreturn)) void servo_main(void)
 
 	link_init();
 	gt_start = gtimer_now();
-	if (ttc_cycle_start(BOARD_CYCLE_PERIOD_US))
-		log_printf("error: cycle period %u us not reachable\n", (unsigned)BOARD_CYCLE_PERIOD_US);
+	/* A restart finds the cycle timer running (ttc.c): its period stands
+	 * until Linux sets cycle_period_us again, and Linux loses no cycle. */
+	period_us = ttc_running_period_us();
+	if (period_us)
+		log_printf("cycle: the cycle timer runs at %u us (a restart): period kept, Linux's counter untouched\n",
+			   (unsigned)period_us);
+	else
+		period_us = BOARD_CYCLE_PERIOD_US;
+	if (ttc_cycle_start(period_us))
+		log_printf("error: cycle period %u us not reachable\n", (unsigned)period_us);
+#if HAVE_AMP_LIB
+	else
+		app_param_running(SP_P_cycle_period_us, period_us);
+#endif
 	last_period_ns = ttc_period_ns();
 	irq_enable(BOARD_NEST_TEST_SGI);
 	irq_enable(BOARD_CYCLE_IRQ);

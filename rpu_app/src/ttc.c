@@ -15,6 +15,12 @@
  * published before the servo reads them and the servo's feedback of cycle
  * n-1 is complete before Linux reads it (docs/cycle.md).
  *
+ * Linux's counter stands for the FPGA's cycle timer, which does not stop
+ * when the servo core does: a firmware stop (servo_quiesce_and_park) leaves
+ * it running, and a restarted firmware takes up its period
+ * (ttc_running_period_us) and starts only its own counter, in phase with
+ * it. Linux's cycle goes on through a firmware restart without a gap.
+ *
  * Interval mode, 16-bit counter, prescaler chosen at run time for the
  * period (the cycle_period_us parameter). The counter restarts from 0 at
  * every interval event, so its value read in the handler is the time
@@ -62,39 +68,76 @@ static void counter_off(uint32_t n)
 	(void)mmio_read32(REG(TTC_ISR(n)));
 }
 
+/* Linux's counter runs (enabled, interval mode, its interrupt on) with
+ * exactly the setting s: then it is left alone. */
+static int linux_counter_runs(const struct ttc_setting *s)
+{
+	uint32_t ctrl = mmio_read32(REG(TTC_CNT_CTRL(L)));
+
+	return !(ctrl & TTC_CNT_DIS) && (ctrl & TTC_CNT_INTERVAL) &&
+	       (mmio_read32(REG(TTC_IER(L))) & TTC_INT_INTERVAL) &&
+	       mmio_read32(REG(TTC_CLK_CTRL(L))) == s->clk &&
+	       (mmio_read32(REG(TTC_INTERVAL(L))) & TTC_CNT_MASK) == s->interval;
+}
+
+uint32_t ttc_running_period_us(void)
+{
+	uint32_t clk = mmio_read32(REG(TTC_CLK_CTRL(L)));
+	uint64_t ticks = (uint64_t)(mmio_read32(REG(TTC_INTERVAL(L))) & TTC_CNT_MASK) + 1u;
+	uint64_t div = ttc_clk_div(clk);
+	uint64_t us = (ticks * div * 1000000u + BOARD_TTC_HZ / 2u) / BOARD_TTC_HZ;
+	struct ttc_setting s;
+
+	if (!us || us > 0xffffffffu || ttc_setting((uint32_t)us, &s) || !linux_counter_runs(&s))
+		return 0;
+	return (uint32_t)us;
+}
+
 int ttc_cycle_start(uint32_t period_us)
 {
 	struct ttc_setting s;
-	uint32_t flags;
+	uint32_t flags, half, prev;
+	int keep;
 
 	if (ttc_setting(period_us, &s))
 		return -1;
 	flags = irq_save();
 	counter_off(N);
-	counter_off(L);
+	/* Linux's counter is the FPGA's cycle timer: running at this period
+	 * (a firmware restart), it goes on; Linux misses no cycle. */
+	keep = linux_counter_runs(&s);
+	if (!keep)
+		counter_off(L);
 	ns_per_tick_q16 = s.ns_per_tick_q16;
 	period_ns = s.period_ns;
-	for (uint32_t n = 0; n < 2u; n++) {
-		uint32_t c = n ? N : L;
-
-		mmio_write32(REG(TTC_CLK_CTRL(c)), s.clk);
-		mmio_write32(REG(TTC_INTERVAL(c)), s.interval);
-		mmio_write32(REG(TTC_IER(c)), TTC_INT_INTERVAL);
+	mmio_write32(REG(TTC_CLK_CTRL(N)), s.clk);
+	mmio_write32(REG(TTC_INTERVAL(N)), s.interval);
+	mmio_write32(REG(TTC_IER(N)), TTC_INT_INTERVAL);
+	if (!keep) {
+		mmio_write32(REG(TTC_CLK_CTRL(L)), s.clk);
+		mmio_write32(REG(TTC_INTERVAL(L)), s.interval);
+		mmio_write32(REG(TTC_IER(L)), TTC_INT_INTERVAL);
+		mmio_write32(REG(TTC_CNT_CTRL(L)), TTC_CNT_INTERVAL | TTC_CNT_RST | TTC_CNT_WAVE_DIS);
 	}
-	/* Linux's counter first; this core's half a period later. */
-	mmio_write32(REG(TTC_CNT_CTRL(L)), TTC_CNT_INTERVAL | TTC_CNT_RST | TTC_CNT_WAVE_DIS);
-	for (uint32_t i = 0; i < 10000000u; i++)
-		if ((mmio_read32(REG(TTC_CNT_VAL(L))) & TTC_CNT_MASK) >= s.interval / 2u)
+	/* This core's counter starts when Linux's crosses half its interval
+	 * (from below: a running counter may be past it now). */
+	half = s.interval / 2u;
+	prev = mmio_read32(REG(TTC_CNT_VAL(L))) & TTC_CNT_MASK;
+	for (uint32_t i = 0; i < 10000000u; i++) {
+		uint32_t v = mmio_read32(REG(TTC_CNT_VAL(L))) & TTC_CNT_MASK;
+
+		if (v >= half && prev < half)
 			break;
+		prev = v;
+	}
 	mmio_write32(REG(TTC_CNT_CTRL(N)), TTC_CNT_INTERVAL | TTC_CNT_RST | TTC_CNT_WAVE_DIS);
 	irq_restore(flags);
 	return 0;
 }
 
-void ttc_cycle_stop(void)
+void ttc_servo_stop(void)
 {
 	counter_off(N);
-	counter_off(L);
 	counter_off(X);
 }
 

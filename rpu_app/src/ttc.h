@@ -14,9 +14,16 @@ struct ttc_setting {
 };
 /* 0 and *s for a period in microseconds, -1 if the 16-bit counter cannot. */
 int ttc_setting(uint32_t period_us, struct ttc_setting *s);
-/* (Re)program and start both counters; -1 if the period is unreachable. */
+/* (Re)program and start both counters; -1 if the period is unreachable.
+ * Linux's counter, already running at this period, is left as it is; this
+ * core's counter starts half a period after Linux's. */
 int ttc_cycle_start(uint32_t period_us);
-void ttc_cycle_stop(void);	/* also stops the stray counter */
+/* This core's counter and the stray counter off; Linux's runs on (a stop
+ * of the firmware: the cycle timer is the FPGA's, not this core's). */
+void ttc_servo_stop(void);
+/* The period (us) Linux's counter runs at, as ttc_setting() would program
+ * it; 0 if it is stopped or programmed otherwise. */
+uint32_t ttc_running_period_us(void);
 /* Debug (SP_DEBUG_STRAY_IRQ): start the TTC counter used by neither cycle,
  * interval mode, its interrupt enabled and never cleared here; returns its
  * GIC ID. */
