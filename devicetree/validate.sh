@@ -22,7 +22,11 @@ venv=$repo/.venv/bin
 out=$repo/build/dt
 mkdir -p "$out"
 
-ksrc=$(sed -n 's/^src=//p' "$repo/build/kernel/info" 2>/dev/null || true)
+# the kernel's source (dt-bindings headers): that of any variant built
+ksrc=""
+for k in kernel-rt kernel; do
+	[ -n "$ksrc" ] || ksrc=$(sed -n 's/^src=//p' "$repo/build/$k/info" 2>/dev/null || true)
+done
 [ -d "$ksrc" ] || { echo "validate: no kernel source; run linux/kernel/build.sh" >&2; exit 1; }
 dtb=$repo/build/boards/$board/linux.dtb
 [ -f "$dtb" ] || { echo "validate: $dtb missing; run west emu --build-only" >&2; exit 1; }

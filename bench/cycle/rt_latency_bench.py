@@ -4,9 +4,18 @@
 idle and with Linux loaded (issue 23, item 2; printed, not asserted).
 
     .venv/bin/python bench/cycle/rt_latency_bench.py [--cycles 100000]
-        [--kernels default,rt] [--rates 1000,4000]
+        [--kernels vanilla,rt] [--rates 1000,4000]
         [--loads idle,hackbench,cpu,net,recovery]
-        [--json bench/results/rt_latency.json]
+        [--json bench/results/rt_latency.json] [--jobs 2] [--resume]
+
+``--jobs 2`` boots both kernels at once (each QEMU runs on one host core:
+on two free cores the wall time halves). ``--resume`` keeps the windows an
+interrupted run saved in its partial file (build/bench/rt_latency/
+<json stem>.partial.json, written after every window) when it was measured
+with the same --cycles, QEMU and kernel builds, and measures only the
+others: the 100,000-cycle table needs about 4.7 h of one core, more than
+one sitting on a shared host. Every window records its build (kernel key,
+initramfs hash) and when it was measured.
 
 For each kernel (linux/kernel/build.sh --variant; SERVOAMP_KERNEL) one boot
 of zynq7000_qemu on virtual time (-icount shift=0: 1 instruction = 1 guest
@@ -66,6 +75,8 @@ preemption, not a Zynq-7000's microseconds.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
+import hashlib
 import json
 import math
 import os
@@ -413,17 +424,33 @@ def window(sh: Callable[..., str], tel: Telemetry, nport: int, load: str, cycles
     return out
 
 
-def run_kernel(board: qemu.Board, kernel: str, cycles: int, rates: list[int], loads: list[str],
-               save: Callable[[dict[str, Any]], None] = lambda _k: None) -> dict[str, Any]:
+def build_identity(kernel: str, images: qemu.Images) -> dict[str, str]:
+    """What a window's figures depend on besides the guest's own code: the
+    kernel build (its cache key) and the initramfs (servod, the firmware)."""
+    info = (images.zimage.parent / "info").read_text()
+    key = next((ln.split("=", 1)[1] for ln in info.splitlines() if ln.startswith("key=")), "")
+    return {"kernel": kernel, "kernel_key": key,
+            "initramfs_sha256": hashlib.sha256(images.initramfs.read_bytes()).hexdigest()[:16]}
+
+
+def run_kernel(board: qemu.Board, kernel: str, images: qemu.Images, cycles: int, rates: list[int],
+               loads: list[str], save: Callable[[dict[str, Any]], None] = lambda _k: None,
+               done: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """One boot of ``kernel``: every rate and load; ``save`` gets the
-    kernel's results after every window (a partial results file)."""
-    images = bench_images(board, kernel, REPO / "build/bench/rt_latency" / kernel)
+    kernel's results after every window (a partial results file). ``done``:
+    this kernel's results of an interrupted run (--resume): its windows are
+    kept and not measured again; nothing is booted if none is left."""
+    ident = build_identity(kernel, images)
+    kept = {r: dict((done or {}).get("rates", {}).get(str(r), {}).get("windows", {})) for r in rates}
+    if all(name in kept[r] for r in rates for name in loads):
+        print(f"[{kernel:7}] every window kept from the interrupted run", flush=True)
+        return dict(done or {})
     prompt = str(board.data["linux"]["prompt"])
     tport, nport = free_port(), free_port()
     nic = ["-nic", f"user,model=cadence_gem,hostfwd=tcp:127.0.0.1:{tport}-:{TELEMETRY_PORT},"
                    f"hostfwd=tcp:127.0.0.1:{nport}-:{SINK_PORT}"]
     m = qemu.QemuMachine(board, images, accel="tcg,thread=single", clock="virtual", extra_args=nic)
-    out: dict[str, Any] = {"kernel": kernel, "kernelrelease": "", "rates": {}}
+    out: dict[str, Any] = {"kernel": kernel, "kernelrelease": "", "build": ident, "rates": {}}
     token = os.urandom(16).hex()
     with m:
         qemu.boot_to_shell(m, timeout=180)
@@ -460,7 +487,12 @@ def run_kernel(board: qemu.Board, kernel: str, cycles: int, rates: list[int], lo
                 r: dict[str, Any] = {"period_us": period_us, "windows": {}}
                 out["rates"][str(rate)] = r
                 for name in loads:
+                    if name in kept[rate]:
+                        r["windows"][name] = kept[rate][name]
+                        continue
                     w = window(sh, tel, nport, name, cycles, period_us)
+                    w["build"] = ident
+                    w["measured_at"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
                     r["windows"][name] = w
                     save(out)
                     s, ct = w["servod_wake_ns"], w["cyclictest"]
@@ -499,11 +531,19 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cycles", type=int, default=10_000,
                     help="cycles per window and rate (default: %(default)s; the committed results: 100000)")
-    ap.add_argument("--kernels", default="default,rt")
+    ap.add_argument("--kernels", default="vanilla,rt")
     ap.add_argument("--rates", default="1000,4000", help="cycle rates in Hz (default: %(default)s)")
     ap.add_argument("--loads", default=",".join(DEFAULT_LOADS))
     ap.add_argument("--json", type=Path, default=REPO / "bench/results/rt_latency.json")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="kernels booted at once (each QEMU runs on one host core; default: %(default)s)")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the windows of an interrupted run of the same --json (its partial file in "
+                         "build/bench/rt_latency/), measured with the same --cycles, QEMU and kernel builds, "
+                         "and measure only the others")
     args = ap.parse_args()
+    if args.jobs < 1:
+        ap.error("--jobs: at least 1")
     loads = args.loads.split(",")
     for name in loads:
         if name not in LOADS:
@@ -532,12 +572,38 @@ def main() -> int:
     partial = REPO / "build/bench/rt_latency" / (args.json.stem + ".partial.json")  # not in bench/results
     partial.parent.mkdir(parents=True, exist_ok=True)
 
-    def save(k: dict[str, Any]) -> None:
-        result["kernels"][k["kernel"]] = k
-        partial.write_text(json.dumps({**result, "partial": True}, indent=2) + "\n")
+    lock = threading.Lock()
 
-    for kernel in kernels:
-        result["kernels"][kernel] = run_kernel(board, kernel, args.cycles, rates, loads, save)
+    def save(k: dict[str, Any]) -> None:
+        with lock:
+            result["kernels"][k["kernel"]] = k
+            partial.write_text(json.dumps({**result, "partial": True}, indent=2) + "\n")
+
+    # the images first, one kernel after the other (the build steps share
+    # build/ and the environment), then the boots, --jobs at a time
+    images = {k: bench_images(board, k, REPO / "build/bench/rt_latency" / k) for k in kernels}
+    done: dict[str, Any] = {}
+    if args.resume and partial.exists():
+        old = json.loads(partial.read_text())
+        for kernel in kernels:
+            k = old.get("kernels", {}).get(kernel)
+            if not k:
+                continue
+            same = (old.get("cycles_per_window") == args.cycles and old.get("qemu") == result["qemu"]
+                    and k.get("build", {}).get("kernel_key") == build_identity(kernel, images[kernel])["kernel_key"])
+            n = sum(len(r.get("windows", {})) for r in k.get("rates", {}).values())
+            print(f"[{kernel:7}] resume: {n} windows in {partial}: "
+                  + ("kept" if same else "not kept (other --cycles, QEMU or kernel build)"), flush=True)
+            if same:
+                done[kernel] = k
+        result["resumed_from"] = {"partial": str(partial), "started": old.get("started"),
+                                  "kernels": sorted(done)}
+    result["started"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        futures = {k: pool.submit(run_kernel, board, k, images[k], args.cycles, rates, loads, save, done.get(k))
+                   for k in kernels}
+        for kernel in kernels:
+            result["kernels"][kernel] = futures[kernel].result()
     result["verdict"] = verdict(result)
     print(f"\n{args.cycles} cycles per window (virtual time; guest ns = instructions); servod columns in us "
           "from its telemetry, cyclictest in us from its own output\n")

@@ -2,16 +2,18 @@
 # Build the servoamp Linux kernel for the Zynq-7000 (zImage + the prepared
 # build tree that the out-of-tree remoteproc module is compiled against).
 #
-#   linux/kernel/build.sh                  # build or reuse the cached kernel
-#   linux/kernel/build.sh --print          # same, then print the kernel directory
-#   linux/kernel/build.sh --variant rt     # the PREEMPT_RT kernel (see below)
+#   linux/kernel/build.sh                    # build or reuse the cached board kernel (rt)
+#   linux/kernel/build.sh --print            # same, then print the kernel directory
+#   linux/kernel/build.sh --variant vanilla  # the non-preemptible kernel (see below)
 #
 # Source: Debian's linux-source-6.1 (/usr/src/linux-source-6.1.tar.xz,
 # installed by scripts/bootstrap.sh). Configuration: `allnoconfig` plus
 # servoamp.config through KCONFIG_ALLCONFIG; every symbol of the fragment is
 # checked in the resulting .config.
 #
-# Variants: `default` (the kernel above, non-preemptible) and `rt`: the same
+# Variants: `rt` (the board's kernel, this script's default) and `vanilla`
+# (the kernel above, non-preemptible: the board's kernel before issue 23's
+# latency table; SERVOAMP_KERNEL=vanilla boots it). `rt` is the same
 # source with Debian's PREEMPT_RT series (debian/patches-rt of the `linux`
 # source package) applied in series order, configured with servoamp.config
 # then rt.config (rt-series.skip names the patches of the series left out,
@@ -30,10 +32,10 @@
 #   kernel/<key>/obj/                           O= build tree
 #   kernel/<key>/zImage, config, info, ok       results (ok = complete)
 # key = sha256(source package version, fragment, build recipe) for the
-# default kernel, plus variant, RT series (Debian version, hash of the
+# vanilla kernel, plus variant, RT series (Debian version, hash of the
 # series and its patches) and rt.config for `rt`. A new key starts from the
 # newest complete build tree of the same (patched) source, so a one-symbol
-# change rebuilds incrementally. build/kernel (default) and build/kernel-rt
+# change rebuilds incrementally. build/kernel (vanilla) and build/kernel-rt
 # in the repository are symlinks to the current kernel/<key>/ directory.
 #
 # Only the SERVOAMP_KEEP (default 3) newest complete builds of each variant
@@ -52,11 +54,11 @@ cache=${SERVOAMP_CACHE:-$HOME/.cache/servoamp}
 jobs=${SERVOAMP_JOBS:-2}
 tarball=/usr/src/linux-source-6.1.tar.xz
 print_dir=0
-variant=default
+variant=rt
 # The build recipe in the key: change it (to any new value) when an edit of
 # the build steps below must rebuild every cached kernel. Its value is the
 # sha256 this script had when the key hashed the script itself, so the
-# default kernel kept its key when the variants came.
+# vanilla kernel kept its key when the variants came.
 recipe=a974c7da9b9eae39383713816ad522d6b958821a439dd5e5100ccb8464580e12
 
 log() { printf '[kernel] %s\n' "$*" >&2; }
@@ -65,14 +67,14 @@ die() { printf '[kernel] error: %s\n' "$*" >&2; exit 1; }
 while [ $# -gt 0 ]; do
 	case $1 in
 	--print) print_dir=1; shift ;;
-	--variant) [ $# -ge 2 ] || die "--variant needs a name (default, rt)"; variant=$2; shift 2 ;;
+	--variant) [ $# -ge 2 ] || die "--variant needs a name (vanilla, rt)"; variant=$2; shift 2 ;;
 	--variant=*) variant=${1#--variant=}; shift ;;
-	*) die "unknown argument: $1 (usage: build.sh [--variant default|rt] [--print])" ;;
+	*) die "unknown argument: $1 (usage: build.sh [--variant vanilla|rt] [--print])" ;;
 	esac
 done
 case $variant in
-default | rt) ;;
-*) die "unknown variant '$variant' (default, rt)" ;;
+vanilla | rt) ;;
+*) die "unknown variant '$variant' (vanilla, rt)" ;;
 esac
 
 [ -r "$tarball" ] || die "$tarball missing: run scripts/bootstrap.sh"
@@ -180,7 +182,7 @@ if [ "$variant" = rt ]; then
 	link=$repo/build/kernel-rt
 	fragments=("$fragment" "$rt_fragment")
 else
-	# unchanged from before the variants: the default kernel's key
+	# unchanged from before the variants: the vanilla kernel's key
 	key=$({
 		printf 'linux-source-6.1 %s\n' "$version"
 		sha256sum <"$fragment"
@@ -330,11 +332,14 @@ secs=$(elapsed)
 } >"$out/info"
 touch "$out/ok"
 # 5. Prune: keep the newest complete builds of this variant (each is about
-#    130 MB); a build without a variant file is a default one.
+#    130 MB); a build without a variant file, or with `default` (the
+#    vanilla kernel's name before the RT kernel became the board's), is a
+#    vanilla one.
 ls -td "$cache"/kernel/*/ | while read -r d; do
 	d=${d%/}
-	v=default
+	v=vanilla
 	[ -f "$d/variant" ] && v=$(cat "$d/variant")
+	[ "$v" != default ] || v=vanilla
 	if [ "$v" = "$variant" ]; then echo "$d"; fi
 done | tail -n +$((${SERVOAMP_KEEP:-3} + 1)) | while read -r d; do
 	[ "$d" = "$out" ] || rm -rf "$d"

@@ -132,29 +132,30 @@ def _run(cmd: Sequence[str | Path], **kw: Any) -> subprocess.CompletedProcess[st
     return res
 
 
-KERNELS = ("default", "rt")
+KERNELS = ("rt", "vanilla")
 
 
 def default_kernel() -> str:
-    """The kernel variant the board boots: ``default`` (non-preemptible
-    6.1) or ``rt`` (PREEMPT_RT, linux/kernel/build.sh --variant rt), from
-    $SERVOAMP_KERNEL (``west emu --kernel`` sets it); default: ``default``."""
-    kernel = os.environ.get("SERVOAMP_KERNEL") or "default"
+    """The kernel variant the board boots: ``rt`` (PREEMPT_RT, the
+    default: issue 23's latency table, docs/cycle.md) or ``vanilla`` (the
+    non-preemptible 6.1), from $SERVOAMP_KERNEL (``west emu --kernel`` sets
+    it); linux/kernel/build.sh --variant builds either."""
+    kernel = os.environ.get("SERVOAMP_KERNEL") or "rt"
     if kernel not in KERNELS:
         raise QemuError(f"SERVOAMP_KERNEL={kernel}: expected one of {', '.join(KERNELS)}")
     return kernel
 
 
 def kernel_link(kernel: str | None = None) -> Path:
-    """``build/kernel`` (default) or ``build/kernel-rt``: the link to the
+    """``build/kernel-rt`` or ``build/kernel`` (vanilla): the link to the
     variant's cached build (linux/kernel/build.sh)."""
     kernel = kernel or default_kernel()
-    return REPO / "build" / ("kernel" if kernel == "default" else f"kernel-{kernel}")
+    return REPO / "build" / ("kernel" if kernel == "vanilla" else f"kernel-{kernel}")
 
 
 def kernel_dir(kernel: str | None = None) -> Path:
     """The kernel build of variant ``kernel`` (default:
-    :func:`default_kernel`; ``build/kernel[-rt]`` -> cache), built if
+    :func:`default_kernel`; ``build/kernel-rt`` or ``build/kernel`` -> cache), built if
     missing."""
     kernel = kernel or default_kernel()
     link = kernel_link(kernel)

@@ -9,9 +9,10 @@
                                      # telemetry port forwarded to 127.0.0.1)
 
 What it builds (each step is cached and costs about a second when nothing
-changed): the kernel (linux/kernel/build.sh, cached by source version +
-config fragment; with --kernel rt or SERVOAMP_KERNEL=rt the PREEMPT_RT
-variant, cached by source + RT patch series + fragments), the remoteproc
+changed): the kernel (linux/kernel/build.sh: the PREEMPT_RT kernel, cached
+by source + RT patch series + config fragments; with --kernel vanilla or
+SERVOAMP_KERNEL=vanilla the non-preemptible one, cached by source +
+fragment), the remoteproc
 module, rpu_app (its Makefile, when it exists), the test firmware
 (tests/robot/fixtures), the initramfs, the boot stub and the DTB. The
 board's numbers come from boards/<board>/board.yaml.
@@ -62,8 +63,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         help="virtual time with this -icount value instead of the board's "
                              "(one instruction = 2^shift ns)")
     parser.add_argument("--kernel", choices=qemu.KERNELS, default=None,
-                        help="kernel variant: default (non-preemptible 6.1) or rt (PREEMPT_RT); "
-                             "default: $SERVOAMP_KERNEL, else default")
+                        help="kernel variant: rt (PREEMPT_RT) or vanilla (non-preemptible 6.1); "
+                             "default: $SERVOAMP_KERNEL, else rt")
     parser.add_argument("--firmware", action="append", type=Path, default=None, metavar="ELF",
                         help="ELF to put in /lib/firmware (repeatable; default: test fixtures + rpu_app)")
     parser.add_argument("--no-rpu-app", action="store_true", help="do not build or include rpu_app")

@@ -81,7 +81,7 @@ def _window(missed: int, wake: list[int], ct_max: int) -> dict[str, Any]:
 
 def _result() -> dict[str, Any]:
     return {"kernels": {
-        "default": {"rates": {"1000": {"windows": {"idle": _window(0, [4200, 4300], 9),
+        "vanilla": {"rates": {"1000": {"windows": {"idle": _window(0, [4200, 4300], 9),
                                                    "hackbench": _window(2, [4200, 61000], 70)}}}},
         "rt": {"rates": {"4000": {"windows": {"idle": _window(0, [8800, 9000], 5)}}}},
     }}
@@ -92,15 +92,15 @@ def test_table_and_figures(rb: ModuleType) -> None:
     md = rb.table_markdown(r).splitlines()
     assert md[0].startswith("| kernel | rate | load | cycles | records | missed | servod min | p99 | p99.99 | max |")
     assert len(md) == 2 + 3
-    assert md[3] == "| default | 1 kHz | hackbench | 4 | 2 | 2 | 4.2 | 61.0 | 61.0 | 61.0 | 3 / 3 / 70 | 4 / 71 |"
+    assert md[3] == "| vanilla | 1 kHz | hackbench | 4 | 2 | 2 | 4.2 | 61.0 | 61.0 | 61.0 | 3 / 3 / 70 | 4 / 71 |"
     assert md[4].startswith("| rt | 4 kHz | idle | 2 | 2 | 0 | 8.8 |")
     figs = rb.figures(r)
     names = [f["name"] for f in figs]
     assert len(names) == len(set(names))
-    assert "default_1khz_hackbench_wake_p9999" in names and "rt_4khz_idle_cyclictest_max" in names
+    assert "vanilla_1khz_hackbench_wake_p9999" in names and "rt_4khz_idle_cyclictest_max" in names
     assert bench.validate({"benchmark": "rt_latency", "figures": figs}) == []
     v = rb.verdict(r)
-    assert v.startswith("lower worst-case wake-up: rt") and "default: 2 missed" in v
+    assert v.startswith("lower worst-case wake-up: rt") and "vanilla: 2 missed" in v
 
 
 def test_committed_results_agree_with_their_windows(rb: ModuleType) -> None:
