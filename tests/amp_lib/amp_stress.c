@@ -21,6 +21,7 @@
  */
 #include <errno.h>
 #include <inttypes.h>
+#include <linux/futex.h>
 #include <pthread.h>
 #include <sched.h>
 #include <signal.h>
@@ -28,15 +29,33 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
+#include <sys/syscall.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
 #include "amp/amp.h"
 
+/*
+ * A wake-up channel between the two sides (test machinery, not amp_lib):
+ * seq is a futex word the waiter sleeps on and the other side bumps, then
+ * wakes, after it has published something (a command, an answer, a flag);
+ * sleeping tells the bumper a FUTEX_WAKE is needed. Both words are only
+ * ever accessed with atomics (ThreadSanitizer in --threads mode).
+ */
+struct chan {
+	uint32_t seq;
+	uint32_t sleeping;
+};
+
 /* Shared between the test processes, NOT part of the OCM layout. */
 struct ctl {
 	uint32_t done;
+	struct chan to_servo;	/* lockstep: Linux published a command / done */
+	struct chan to_linux;	/* lockstep: the servo answered / is ready */
+	uint32_t mbox_calls;	/* lockstep: mailbox calls Linux has started */
+	uint64_t servo_sleeps, servo_timeouts;
 	uint32_t tick;		/* watchdog mode: the FPGA cycle counter */
 	uint32_t linux_ready, servo_ready;
 	uint64_t linux_errors, servo_errors;
@@ -64,10 +83,19 @@ static uint32_t xorshift(uint32_t *s)
 	return *s = x;
 }
 
-/* Random delay: mostly none, sometimes a short spin, rarely a yield. */
+/*
+ * Random delay, so that each side is caught at every point of the other's
+ * protocol steps: mostly none (200 in 256), sometimes a short spin of up
+ * to 1023 pauses (54 in 256), rarely (2 in 256) a sleep of 1-16 us, in
+ * which the side leaves its CPU in the middle of a step as a preempted
+ * process would. A sleep blocks rather than yields: sched_yield() hands a
+ * whole time slice to any other process on a loaded core, which made the
+ * run time depend on the host's load.
+ */
 static void jitter(uint32_t *rng)
 {
 	uint32_t r = xorshift(rng);
+	struct timespec ts = { 0, 1000L * (long)(1u + ((r >> 8) & 15u)) };
 
 	if ((r & 0xff) < 200)
 		return;
@@ -76,7 +104,7 @@ static void jitter(uint32_t *rng)
 			AMP_PORT_RELAX();
 		return;
 	}
-	sched_yield();
+	nanosleep(&ts, NULL);
 }
 
 static void fail(uint64_t *counter, const char *fmt, uint64_t a, uint64_t b)
@@ -107,18 +135,6 @@ static void pin(int cpu)
 	sched_setaffinity(0, sizeof(set), &set);	/* best effort */
 }
 
-/* Spin a little, then give the core away: on a loaded machine the peer
- * may be waiting for this very CPU. */
-static void backoff(uint32_t *spins)
-{
-	if (++*spins < 256) {
-		AMP_PORT_RELAX();
-	} else {
-		*spins = 0;
-		sched_yield();
-	}
-}
-
 static uint32_t ld(const uint32_t *p)
 {
 	return __atomic_load_n(p, __ATOMIC_ACQUIRE);
@@ -127,6 +143,90 @@ static uint32_t ld(const uint32_t *p)
 static void st(uint32_t *p, uint32_t v)
 {
 	__atomic_store_n(p, v, __ATOMIC_RELEASE);
+}
+
+/*
+ * Waiting for the peer, independent of the host's load. The waiter reads
+ * chan_epoch() BEFORE it checks its condition; if it must wait, it calls
+ * backoff() with that epoch: a bounded spin, then a FUTEX_WAIT on the
+ * epoch (it sleeps only if nothing was published since). The publisher
+ * calls kick() after publishing. Sleeping, not sched_yield(): a yield on a
+ * core shared with a busy process hands it a whole time slice, and the two
+ * sides got a few % of a CPU. The futex is not private (the two processes
+ * share the page through MAP_SHARED) and has a timeout, so that a lost
+ * wake-up can only cost that much; the timeouts are counted.
+ */
+#define SPIN_LIMIT	256u		/* pauses, ~10 us: longer spins lose more on a loaded core */
+#define WAIT_NS		1000000L	/* 1 ms: a wake-up should have come */
+#define POLL_NS		20000L		/* 20 us: the peer will publish without a kick */
+
+struct wait_stats {
+	uint32_t spins;
+	uint64_t sleeps, timeouts;
+};
+
+static uint32_t chan_epoch(struct chan *c)
+{
+	return __atomic_load_n(&c->seq, __ATOMIC_SEQ_CST);
+}
+
+static void backoff(struct chan *c, uint32_t epoch, struct wait_stats *w, long timeout_ns)
+{
+	struct timespec ts = { 0, timeout_ns };
+
+	if (++w->spins < SPIN_LIMIT) {
+		AMP_PORT_RELAX();
+		return;
+	}
+	w->spins = 0;
+	/* seq_cst on both sides: either kick() sees sleeping set and wakes,
+	 * or this load sees its bump and there is no sleep */
+	__atomic_store_n(&c->sleeping, 1u, __ATOMIC_SEQ_CST);
+	if (chan_epoch(c) == epoch) {
+		w->sleeps++;
+		if (syscall(SYS_futex, &c->seq, FUTEX_WAIT, epoch, &ts, NULL, 0) != 0 &&
+		    errno == ETIMEDOUT)
+			w->timeouts++;
+	}
+	__atomic_store_n(&c->sleeping, 0u, __ATOMIC_SEQ_CST);
+}
+
+static void kick(struct chan *c)
+{
+	__atomic_fetch_add(&c->seq, 1u, __ATOMIC_SEQ_CST);
+	if (__atomic_load_n(&c->sleeping, __ATOMIC_SEQ_CST))
+		syscall(SYS_futex, &c->seq, FUTEX_WAKE, 1, NULL, NULL, 0);
+}
+
+/* Wait on c until cond() holds (cond reads what the kicker published). */
+static void wait_until(struct chan *c, struct wait_stats *w, int (*cond)(void))
+{
+	for (;;) {
+		uint32_t epoch = chan_epoch(c);
+
+		if (cond())
+			break;
+		backoff(c, epoch, w, WAIT_NS);
+	}
+	w->spins = 0;
+}
+
+/* For the waits nobody kicks (attach): block for a moment, do not yield. */
+static void pause_briefly(void)
+{
+	struct timespec ts = { 0, 10000 };
+
+	nanosleep(&ts, NULL);
+}
+
+static int servo_is_ready(void)
+{
+	return ld(&ctl->servo_ready) != 0;
+}
+
+static int cycle_answered(void)
+{
+	return ld(&ocm->cyc_sem.sem) == AMP_SEM_IDLE;
 }
 
 /* ---------------- lockstep mode ---------------- */
@@ -138,16 +238,22 @@ static void *servo_lockstep(void *arg)
 	struct amp_rx_info rx;
 	struct amp_mbox_req req;
 	uint8_t buf[AMP_MBOX_CAPACITY];
-	uint32_t rng = seed * 7u + 1u, expect = 1, spins = 0;
+	uint32_t rng = seed * 7u + 1u, expect = 1;
+	struct wait_stats w = { 0, 0, 0 };
 	uint64_t errs = 0, mbox = 0, cycles = 0;
 	int rc;
 
 	(void)arg;
 	pin(1);
 	while ((rc = amp_servo_attach(&s, ocm, AMP_OCM_SIZE)) != AMP_OK)
-		sched_yield();
+		pause_briefly();
 	st(&ctl->servo_ready, 1);
-	while (!ld(&ctl->done)) {
+	kick(&ctl->to_linux);
+	for (;;) {
+		uint32_t epoch = chan_epoch(&ctl->to_servo);
+
+		if (ld(&ctl->done))
+			break;
 		rc = amp_servo_mbox_poll(&s, &req);
 		if (rc == 1) {
 			/* answer: the payload reversed, status = command + length */
@@ -160,9 +266,14 @@ static void *servo_lockstep(void *arg)
 			fail(&errs, "servo: invalid mailbox request (%" PRIu64 ", %" PRIu64 ")", mbox, 0);
 		}
 		if (ld(&ocm->linux_line.cmd_pub) == s.cmd_seq) {
-			backoff(&spins);
+			/* Linux kicks when it starts a mailbox call, but the
+			 * request is posted inside amp_linux_mbox_call, with
+			 * no kick after it: until it is here, poll for it */
+			backoff(&ctl->to_servo, epoch, &w,
+				ld(&ctl->mbox_calls) != (uint32_t)mbox ? POLL_NS : WAIT_NS);
 			continue;
 		}
+		w.spins = 0;
 		jitter(&rng);
 		amp_servo_cycle_rx(&s, 0, &rx);
 		if (rx.status != AMP_RX_FRESH || rx.seq != expect) {
@@ -187,11 +298,14 @@ static void *servo_lockstep(void *arg)
 		}
 		jitter(&rng);
 		amp_servo_cycle_tx(&s, fb, n_axes, rx.seq, 0);
+		kick(&ctl->to_linux);
 		cycles++;
 	}
 	ctl->servo_errors = errs + s.st.torn + s.st.invalid + s.st.missed;
 	ctl->servo_cycles = cycles;
 	ctl->servo_mbox = mbox;
+	ctl->servo_sleeps = w.sleeps;
+	ctl->servo_timeouts = w.timeouts;
 	return NULL;
 }
 
@@ -201,22 +315,21 @@ static void *linux_lockstep(void *arg)
 	struct amp_cmd_axis cmd[AMP_MAX_AXES];
 	struct amp_rx_info rx;
 	uint8_t out[AMP_MBOX_CAPACITY], in[AMP_MBOX_CAPACITY];
-	uint32_t rng = seed, spins = 0;
+	uint32_t rng = seed;
+	struct wait_stats w = { 0, 0, 0 };
 	uint64_t errs = 0, every = n_mbox ? n_cycles / n_mbox : 0, mbox_done = 0;
 	int rc;
 
 	(void)arg;
 	pin(0);
 	/* the servo is attached by the parent's ordering: init first */
-	while (!ld(&ctl->servo_ready))
-		sched_yield();
+	wait_until(&ctl->to_linux, &w, servo_is_ready);
 	l = *(struct amp_linux *)arg;
 	for (uint64_t i = 1; i <= n_cycles; i++) {
 		uint32_t seq = (uint32_t)i;
 
 		/* lockstep: the servo has answered the previous cycle */
-		while (ld(&ocm->cyc_sem.sem) != AMP_SEM_IDLE)
-			backoff(&spins);
+		wait_until(&ctl->to_linux, &w, cycle_answered);
 		for (uint32_t a = 0; a < n_axes; a++) {
 			cmd[a].target_pos = cmd_val(seq, a, 0);
 			cmd[a].vel_ff = cmd_val(seq, a, 1);
@@ -225,6 +338,7 @@ static void *linux_lockstep(void *arg)
 		}
 		jitter(&rng);
 		rc = amp_linux_cycle(&l, cmd, n_axes, 0, &rx);
+		kick(&ctl->to_servo);
 		if (rc != AMP_OK)
 			fail(&errs, "linux: cycle %" PRIu64 " returned %" PRIu64, i, (uint64_t)(int64_t)rc);
 		if (i > 1) {
@@ -243,6 +357,8 @@ static void *linux_lockstep(void *arg)
 
 			for (uint32_t b = 0; b < len; b++)
 				out[b] = (uint8_t)xorshift(&rng);
+			st(&ctl->mbox_calls, (uint32_t)mbox_done + 1u);
+			kick(&ctl->to_servo);
 			rc = amp_linux_mbox_call(&l, &req, &resp, 5000000);
 			if (rc != AMP_OK || resp.length != len || resp.command != seq ||
 			    resp.status != (int32_t)(seq + len))
@@ -257,8 +373,7 @@ static void *linux_lockstep(void *arg)
 		}
 	}
 	/* collect the last feedback, then stop the servo */
-	while (ld(&ocm->cyc_sem.sem) != AMP_SEM_IDLE)
-		backoff(&spins);
+	wait_until(&ctl->to_linux, &w, cycle_answered);
 	for (uint32_t a = 0; a < n_axes; a++) {
 		uint32_t seq = (uint32_t)n_cycles + 1u;
 
@@ -268,11 +383,11 @@ static void *linux_lockstep(void *arg)
 		cmd[a].control_word = (uint32_t)cmd_val(seq, a, 3);
 	}
 	amp_linux_cycle(&l, cmd, n_axes, 0, &rx);
+	kick(&ctl->to_servo);
 	if (rx.status != AMP_RX_FRESH || l.fb.cmd_seq != (uint32_t)n_cycles)
 		fail(&errs, "linux: last feedback %" PRIu64 " status %" PRIu64, l.fb.cmd_seq, rx.status);
 	/* and let the servo answer that last cycle before it is told to stop */
-	while (ld(&ocm->cyc_sem.sem) != AMP_SEM_IDLE)
-		backoff(&spins);
+	wait_until(&ctl->to_linux, &w, cycle_answered);
 	errs += l.st.torn + l.st.invalid + l.st.missed;
 	ctl->linux_errors = errs;
 	printf("linux: cycles %" PRIu64 " fresh %u stale %u torn %u missed %u invalid %u late %u"
@@ -280,7 +395,10 @@ static void *linux_lockstep(void *arg)
 	       l.st.missed, l.st.invalid, l.st.peer_late, l.st.mbox_ok, l.st.mbox_err);
 	if (l.st.mbox_ok != mbox_done)
 		ctl->linux_errors++;
+	printf("linux: waits for the servo: %" PRIu64 " sleeps, %" PRIu64 " ended by the 1 ms timeout\n",
+	       w.sleeps, w.timeouts);
 	st(&ctl->done, 1);
+	kick(&ctl->to_servo);
 	return NULL;
 }
 
@@ -291,6 +409,10 @@ static int run_lockstep(int threads)
 
 	if (amp_linux_init(&l, ocm, AMP_OCM_SIZE, 1000) != AMP_OK)
 		return 2;
+	/* sleeps as short as asked (the jitter's few us, the futex
+	 * timeouts), not rounded up by the default 50 us timer slack;
+	 * inherited by the servo's process or thread. Best effort. */
+	(void)prctl(PR_SET_TIMERSLACK, 1000UL, 0UL, 0UL, 0UL);
 	if (threads) {
 		pthread_t a, b;
 
@@ -307,8 +429,11 @@ static int run_lockstep(int threads)
 		linux_lockstep(&l);
 		waitpid(pid, NULL, 0);
 	}
-	printf("servo: cycles %" PRIu64 " mailbox answers %" PRIu64 " errors %" PRIu64 "\n",
-	       ctl->servo_cycles, ctl->servo_mbox, ctl->servo_errors);
+	printf("servo: cycles %" PRIu64 " mailbox answers %" PRIu64 " errors %" PRIu64
+	       "; waits for Linux: %" PRIu64 " sleeps, %" PRIu64 " ended by a timeout"
+	       " (1 ms, or 20 us for a mailbox request)\n",
+	       ctl->servo_cycles, ctl->servo_mbox, ctl->servo_errors,
+	       ctl->servo_sleeps, ctl->servo_timeouts);
 	if (ctl->servo_cycles != n_cycles + 1)
 		ctl->servo_errors++;
 	if (ctl->linux_errors || ctl->servo_errors) {
@@ -360,8 +485,9 @@ static void servo_watchdog(void)
 	pin(1);
 	realtime();
 	while (amp_servo_attach(&s, ocm, AMP_OCM_SIZE) != AMP_OK)
-		sched_yield();
+		pause_briefly();
 	st(&ctl->servo_ready, 1);
+	kick(&ctl->to_linux);
 	while (!ld(&ctl->done)) {
 		int rc;
 
@@ -419,6 +545,7 @@ static int run_watchdog(void)
 	struct amp_linux l;
 	pid_t lp, sp;
 	struct timespec next;
+	struct wait_stats w = { 0, 0, 0 };
 	uint32_t t = 0, phase_end, ok = 1;
 	int wstatus, servo_reaped = 0;
 
@@ -429,8 +556,7 @@ static int run_watchdog(void)
 		servo_watchdog();
 		_exit(0);
 	}
-	while (!ld(&ctl->servo_ready))
-		sched_yield();
+	wait_until(&ctl->to_linux, &w, servo_is_ready);
 	lp = fork();
 	if (lp == 0) {
 		linux_watchdog(&l);
