@@ -48,26 +48,19 @@ PROGRAM_MAX_S = 600.0                # host seconds a program may take on record
 
 def _wait_program(cb: netboard.ControllerBoard, timeout: float) -> str:
     """Poll ampctl status until the program is no longer running: its state."""
-    deadline = time.monotonic() + timeout
-    while True:
-        st = cb.ampctl("status", expected_rc=None).split()
-        state = next((w.split("=", 1)[1] for w in st if w.startswith("program.state=")), "?")
-        if state not in ("running", "checked", "?") or time.monotonic() > deadline:
-            return state
-        time.sleep(0.5)
+    st = cb.wait_status(lambda st: st.get("program.state", "?") not in ("running", "checked", "?"), timeout,
+                        raise_on_timeout=False)
+    return st.get("program.state", "?")
 
 
 def _wait_drives(cb: netboard.ControllerBoard, n_axes: int, timeout: float = 240.0) -> list[str]:
     """Every axis's drive in "operation enabled" (ampctl status: axisN.drive=)."""
-    deadline = time.monotonic() + timeout
-    while True:
-        st = cb.ampctl("status", expected_rc=None).split()
-        drives = [w for w in st if w.startswith("axis") and ".drive=" in w]
-        if len(drives) >= n_axes and all(w.endswith("=operation-enabled") for w in drives):
-            return drives
-        if time.monotonic() > deadline:
-            raise qemu.QemuError(f"drives not enabled within {timeout:g} s: {drives}")
-        time.sleep(0.5)
+    def enabled(st: dict[str, str]) -> bool:
+        drives = [v for k, v in st.items() if k.startswith("axis") and k.endswith(".drive")]
+        return len(drives) >= n_axes and all(v == "operation-enabled" for v in drives)
+
+    st = cb.wait_status(enabled, timeout, "drives in operation enabled")
+    return [f"{k}={v}" for k, v in st.items() if k.startswith("axis") and k.endswith(".drive")]
 
 
 def _say(msg: str) -> None:

@@ -34,7 +34,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import IO, Any, Mapping, Sequence
+from typing import IO, Any, Callable, Mapping, Sequence
 
 from servoamp import qemu
 from servoamp import telemetry as tw
@@ -71,6 +71,20 @@ def bring_up(console: qemu.Uart, prompt: str, guest_addr: str = GUEST_ADDR,
     if rc or "carrier 1" not in out:
         raise qemu.QemuError(f"guest network not up (exit status {rc}): {out}")
     return out
+
+
+def parse_kv(out: str) -> dict[str, str]:
+    """ampctl's key=value lines; a line of several key=value words
+    ("axis0.drive=... axis0.error=...") gives each."""
+    kv: dict[str, str] = {}
+    for line in out.splitlines():
+        words = line.split()
+        parts = words if len(words) > 1 and all("=" in w for w in words) else [line]
+        for w in parts:
+            k, eq, v = w.partition("=")
+            if eq:
+                kv[k] = v
+    return kv
 
 
 def _log(msg: str) -> None:
@@ -256,6 +270,29 @@ class ControllerBoard:
     def stats(self) -> dict[str, str]:
         out = self.ampctl("stats", expected_rc=None)
         return {k: v for k, _, v in (ln.partition("=") for ln in out.splitlines()) if _}
+
+    def status(self) -> dict[str, str]:
+        """``ampctl status`` (:func:`parse_kv`)."""
+        return parse_kv(self.ampctl("status", expected_rc=None))
+
+    def wait_status(self, ok: Callable[[dict[str, str]], bool], timeout: float, what: str = "",
+                    raise_on_timeout: bool = True) -> dict[str, str]:
+        """Poll :meth:`status` until ``ok(status)``; the status. Paced in
+        guest time (a guest ``sleep 0.5`` between polls): with CAN drives in
+        lockstep the guest runs slower than the host clock, and polling on
+        the host clock ran ampctl several times per guest second. After
+        ``timeout`` host seconds: QemuError, or the last status if not
+        ``raise_on_timeout``."""
+        deadline = time.monotonic() + timeout
+        while True:
+            st = self.status()
+            if ok(st):
+                return st
+            if time.monotonic() > deadline:
+                if raise_on_timeout:
+                    raise qemu.QemuError(f"{what or 'ampctl status'}: not within {timeout:g} s: {st}")
+                return st
+            self.sh("sleep 0.5", timeout=120)
 
     # -- the controller ------------------------------------------------------------------
     def telemetry_args(self) -> str:

@@ -52,21 +52,12 @@ END_TOL_INC = 3
 RECORD_MAX_S = 120.0            # upper bound; the recording stops when the program is done
 
 
-def _kv(out: str) -> dict[str, str]:
-    return {k: v for k, _, v in (ln.partition("=") for ln in out.splitlines()) if _}
-
-
 def _status(cb: netboard.ControllerBoard) -> dict[str, str]:
-    return _kv(cb.ampctl("status", expected_rc=None))
+    return cb.status()
 
 
 def _wait_state(cb: netboard.ControllerBoard, states: set[str], timeout: float) -> dict[str, str]:
-    deadline = time.monotonic() + timeout
-    while True:
-        st = _status(cb)
-        if st.get("program.state") in states or time.monotonic() > deadline:
-            return st
-        time.sleep(0.3)
+    return cb.wait_status(lambda st: st.get("program.state") in states, timeout, raise_on_timeout=False)
 
 
 def _ints(s: str) -> list[int]:

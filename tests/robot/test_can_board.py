@@ -75,37 +75,12 @@ AXIS_LOG = re.compile(r"^axis(\d): can(\d) node (\d+): (.*?)(, fault,|,) error (
 
 
 
-def _kv(out: str) -> dict[str, str]:
-    """ampctl's key=value lines; a line of several key=value words
-    ("axis0.drive=... axis0.error=...") gives each."""
-    kv: dict[str, str] = {}
-    for line in out.splitlines():
-        words = line.split()
-        parts = words if len(words) > 1 and all("=" in w for w in words) else [line]
-        for w in parts:
-            k, eq, v = w.partition("=")
-            if eq:
-                kv[k] = v
-    return kv
-
-
 def _status(cb: netboard.ControllerBoard) -> dict[str, str]:
-    return _kv(cb.ampctl("status", expected_rc=None))
+    return cb.status()
 
 
 def _wait(cb: netboard.ControllerBoard, ok: Any, what: str, timeout: float) -> dict[str, str]:
-    """Poll ampctl status until ok(status), paced in guest time (a guest
-    sleep between polls): in lockstep the guest runs slower than the host
-    clock, and polling on the host clock ran ampctl several times per guest
-    second."""
-    deadline = time.monotonic() + timeout
-    while True:
-        st = _status(cb)
-        if ok(st):
-            return st
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what}: not within {timeout:g} s: {st}")
-        cb.sh("sleep 0.5", timeout=120)
+    return cb.wait_status(ok, timeout, what)
 
 
 def _window(lines: list[dict[str, int]]) -> tuple[dict[int, dict[str, int]], dict[int, dict[str, int]]]:
