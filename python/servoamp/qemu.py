@@ -644,7 +644,10 @@ def connect_unix(path: Path | str, timeout: float = 10.0, what: str = "socket") 
 class Qmp:
     """A minimal QMP client (JSON lines over a unix socket)."""
 
-    def __init__(self, path: Path, timeout: float = 10.0) -> None:
+    def __init__(self, path: Path, timeout: float = 60.0) -> None:
+        # generous: QEMU greets from its main loop, which a host with more
+        # busy processes than cores (seen: load 8 on 2 cores) can hold back
+        # for over 10 s while the vCPU thread starts
         self._sock = connect_unix(path, timeout, "QMP socket")
         self._file = self._sock.makefile("rwb")
         self._read()  # greeting

@@ -106,7 +106,9 @@ def test_emu_images_alone(tree: Path) -> None:
     _need("arm-linux-gnueabihf-gcc", "arm-none-eabi-gcc")
     _run(tree, sys.executable, "scripts/west_commands/emu.py", "--build-only", timeout=1800)
     build = tree / "build"
-    assert (build / "kernel" / "zImage").is_file()
+    # the board's kernel: build/kernel-rt, or build/kernel for SERVOAMP_KERNEL=vanilla
+    kernel = os.environ.get("SERVOAMP_KERNEL") or "rt"
+    assert (build / ("kernel" if kernel == "vanilla" else f"kernel-{kernel}") / "zImage").is_file()
     assert (build / "linux" / "servod" / "servod").is_file()
     assert (build / "motion" / "armhf" / "libmotion.a").is_file()
     assert (build / "firmware" / BOARD / "rpu_app.elf").is_file()
