@@ -93,9 +93,9 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           (),
           ("{python}", "bench/fieldbus/can_bench.py", "--json", "{json}"),
           ("--quick",)),
-    Bench("rt_latency", "servod's wake-up and cyclictest on both kernels (default, PREEMPT_RT) at 1 and 4 kHz, "
+    Bench("rt_latency", "servod's wake-up and cyclictest on both kernels (vanilla, PREEMPT_RT) at 1 and 4 kHz, "
           "idle and under hackbench, a CPU hog, bulk TCP and a recovery (virtual time)",
-          True, "about 20 min at 10,000 cycles per window (two kernel boots, 20 windows; 100,000: about 2.5 h)",
+          True, "about 20 min at 10,000 cycles per window (two kernel boots, 20 windows; 100,000: about 4.7 h of one core, --jobs 2 --resume)",
           (),
           ("{python}", "bench/cycle/rt_latency_bench.py", "--json", "{json}"),
           ("--cycles", "500", "--loads", "idle,cpu")),
