@@ -148,13 +148,12 @@ static void check_attach(struct amp_linux *l, int peer)
 	}
 }
 
-static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx)
+/* the record fb_pub named (pub, read by an acquire load in step 2 of
+ * amp_linux_cycle, before the commands were published) */
+static void read_feedback(struct amp_linux *l, struct amp_rx_info *rx, uint32_t pub)
 {
 	struct amp_ocm *o = l->ocm;
-	uint32_t pub;
 
-	AMP_PORT_CACHE_INVAL(&o->servo_line, sizeof(o->servo_line));
-	pub = RD_ACQ(&o->servo_line.fb_pub);
 	if (amp__rx_record(&l->fb, 1, o->fb, FB_WORDS, FB_END, FB_NAXES, FB_SLOT, pub,
 			   l->fb_seq, l->epoch, &l->fb_resync, rx, &l->st)) {
 		l->fb_seq = pub;
@@ -174,7 +173,7 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	struct amp_rx_info tmp;
 	uint32_t h[AMP_REC_HDR_WORDS];	/* words 1..7, each set below */
 	struct amp_ocm *o;
-	uint32_t seq, sem;
+	uint32_t seq, sem, fb_pub;
 	int peer;
 
 	if (!l || !l->ocm || n_axes > AMP_MAX_AXES || (n_axes && !axes))
@@ -185,7 +184,7 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	peer = amp_linux_peer(l);
 
 	/* 1. heartbeat (the caller has cleared its interrupt flag): counted
-	 * here, written with the publication in step 5 so that the line the
+	 * here, written with the publication in step 4 so that the line the
 	 * servo polls changes once per cycle */
 	l->cycle++;
 	l->st.cycles++;
@@ -196,11 +195,13 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	AMP_PORT_CACHE_INVAL(&o->cyc_sem, 4u);
 	if (RD_ACQ(&o->cyc_sem.sem) == AMP_SEM_BUSY && peer == AMP_OK)
 		l->st.peer_late++;
+	/* ... and the newest feedback's sequence: the record read in step 5
+	 * is the one published before this cycle's commands, whenever the
+	 * servo answers them */
+	AMP_PORT_CACHE_INVAL(&o->servo_line, sizeof(o->servo_line));
+	fb_pub = RD_ACQ(&o->servo_line.fb_pub);
 
-	/* 3. switch the response buffer: read the newest feedback */
-	read_feedback(l, rx);
-
-	/* 4. switch the command buffer: write and publish */
+	/* 3. switch the command buffer: write and publish */
 	/* (the record's header, then the caller's n_axes slots straight to
 	 * OCM: no record built in private memory first) */
 	h[AMP_REC_W(struct amp_cmd_record, epoch)] = l->epoch;
@@ -213,7 +214,7 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	seq = l->cmd_seq + 1u;
 	amp__rec_write(&o->cmd[seq & 1u], h, axes, n_axes * CMD_SLOT, CMD_END, seq);
 
-	/* 5. set the semaphore if the token is ours (idle), THEN publish the
+	/* 4. set the semaphore if the token is ours (idle), THEN publish the
 	 * sequence: a servo that sees the new sequence always finds the
 	 * semaphore busy and hands it back, so "busy" never outlives the
 	 * exchange it stands for */
@@ -241,6 +242,16 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	AMP_PORT_CACHE_CLEAN(&o->linux_line, sizeof(o->linux_line));
 	l->cmd_seq = seq;
 	AMP_PORT_SIGNAL();
+
+	/* 5. switch the response buffer: read the record fb_pub named in
+	 * step 2, after the publication, so that on a coherent host its lines
+	 * move to this core while the servo takes the commands instead of
+	 * before (issue 24: the round trip was one such transfer longer). The
+	 * servo answers these commands in the other buffer (fb_pub + 1); a
+	 * servo two records ahead meanwhile tears the copy (TORN), as it
+	 * would have torn a read before the publication.
+	 * docs/amp-protocol.md section 4. */
+	read_feedback(l, rx, fb_pub);
 
 	/* The watchdog watches the heartbeat from the servo's first attach
 	 * in this epoch on (check_attach), whatever its state and epoch

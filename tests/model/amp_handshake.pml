@@ -352,8 +352,44 @@ inline l_cycle()
 		assert(cyc_sem != IDLE || g_tok == 0 || (g_tok < 31 && ((g_taken >> g_tok) & 1)))
 	};
 #endif
-	/* 3. read_feedback: fb_pub (acquire), amp__rx_record */
+	/* 2. fb_pub (acquire), classified: the record it names is read in
+	 * step 5, after the publication */
 	d_step { pub = fb_pub; classify(pub, fseq, fresync, cls) };
+	/* 3. amp__rec_write of cmd[seq & 1]: seq_begin, the payload, seq_end */
+	d_step {
+		seq = cseq + 1; b = seq & 1;
+		cmd_b[b] = seq;
+		gcmd_st[b] = G_WRITING; cmd_wr(b);
+		gcmd_sess[b] = l_sess; gcmd_last = b
+	};
+	d_step { cmd_ep[b] = ep; cmd_wr(b) };
+	d_step { cmd_e[b] = seq; cmd_wr(b); gcmd_st[b] = G_NEW };
+	/* 4. busy if the token is ours (idle, or a word neither idle nor
+	 * busy: sem_corrupt), THEN publish */
+	d_step { x = cyc_sem };
+	if
+	:: x != BUSY ->
+		d_step {
+			cyc_sem = BUSY; x = 0;
+#ifdef CHECK_ACKSEM
+			g_tok = seq
+#endif
+		}
+	:: else -> x = 0
+	fi;
+#endif
+#ifndef MUTANT_NO_REASSERT
+	/* 4. Linux's own words written again, unchanged: the header (from the
+	 * copy written at init), then its state. One step: the servo reads the
+	 * two together, and a single stray write makes only one of them
+	 * differ */
+	d_step { hdr_ok = 1; hdr_epoch = ep; g_hdr_sess = l_sess; l_state = L_READY };
+#endif
+#ifndef NO_PERIODIC
+	d_step { cmd_pub = seq; cseq = seq; seq = 0; b = 0 };
+	/* 5. read_feedback, after the publication (the feedback's lines move
+	 * while the servo takes the commands): amp__rx_record of the record
+	 * fb_pub named in step 2 */
 	if
 	:: cls == C_FRESH || cls == C_MISSED ->
 		/* amp__rec_read: seq_end, the payload, seq_begin */
@@ -420,38 +456,6 @@ inline l_cycle()
 			pub = 0; cls = 0
 		}
 	fi;
-	/* 4. amp__rec_write of cmd[seq & 1]: seq_begin, the payload, seq_end */
-	d_step {
-		seq = cseq + 1; b = seq & 1;
-		cmd_b[b] = seq;
-		gcmd_st[b] = G_WRITING; cmd_wr(b);
-		gcmd_sess[b] = l_sess; gcmd_last = b
-	};
-	d_step { cmd_ep[b] = ep; cmd_wr(b) };
-	d_step { cmd_e[b] = seq; cmd_wr(b); gcmd_st[b] = G_NEW };
-	/* 5. busy if the token is ours (idle, or a word neither idle nor
-	 * busy: sem_corrupt), THEN publish */
-	d_step { x = cyc_sem };
-	if
-	:: x != BUSY ->
-		d_step {
-			cyc_sem = BUSY; x = 0;
-#ifdef CHECK_ACKSEM
-			g_tok = seq
-#endif
-		}
-	:: else -> x = 0
-	fi;
-#endif
-#ifndef MUTANT_NO_REASSERT
-	/* 5. Linux's own words written again, unchanged: the header (from the
-	 * copy written at init), then its state. One step: the servo reads the
-	 * two together, and a single stray write makes only one of them
-	 * differ */
-	d_step { hdr_ok = 1; hdr_epoch = ep; g_hdr_sess = l_sess; l_state = L_READY };
-#endif
-#ifndef NO_PERIODIC
-	d_step { cmd_pub = seq; cseq = seq; seq = 0; b = 0 };
 #else
 	d_step { cseq++ };	/* the sequence only, for the drain's target */
 #endif

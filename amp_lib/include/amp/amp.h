@@ -146,8 +146,9 @@ int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit);
 
 /*
  * One periodic cycle, the periodic exchange's Linux steps: heartbeat, check the
- * semaphore, read the feedback (into l->fb, described by rx), write the
- * commands (n_axes <= AMP_MAX_AXES), set the semaphore. Returns AMP_OK,
+ * semaphore and the newest feedback's sequence, write the commands (n_axes <=
+ * AMP_MAX_AXES), set the semaphore, publish, then read the feedback record
+ * that sequence named (into l->fb, described by rx). Returns AMP_OK,
  * AMP_E_INVAL, AMP_E_PEER_ABSENT (servo not attached, commands still
  * published), AMP_E_PEER_ERROR (state FAULT or garbage), AMP_E_STALLED or
  * AMP_E_FEEDBACK. The heartbeat watchdog runs from the servo's first attach
