@@ -52,10 +52,6 @@ END_TOL_INC = 3
 RECORD_MAX_S = 120.0            # upper bound; the recording stops when the program is done
 
 
-def _status(cb: netboard.ControllerBoard) -> dict[str, str]:
-    return cb.status()
-
-
 def _wait_state(cb: netboard.ControllerBoard, states: set[str], timeout: float) -> dict[str, str]:
     return cb.wait_status(lambda st: st.get("program.state") in states, timeout, raise_on_timeout=False)
 
@@ -77,14 +73,14 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         cb.wait_telemetry()
         cb.ampctl("param set wd_limit 50")   # as the other board suites: TCG hiccups
         cb.ampctl("resume", expected_rc=None)
-        out["idle"] = _status(cb)
+        out["idle"] = cb.status()
 
         # 1. a malformed program: refused with line and column, the axes hold
         cb.sh("printf 'G21 G90\\nG1 X1 Y1 F1000\\nG1 X2 Q5\\n' > /tmp/bad.nc")
         out["bad_rc"], out["bad_out"] = cb.sh_rc("ampctl run /tmp/bad.nc 2>&1", timeout=30)
-        out["bad_st1"] = _status(cb)
+        out["bad_st1"] = cb.status()
         time.sleep(0.5)
-        out["bad_st2"] = _status(cb)
+        out["bad_st2"] = cb.status()
 
         # 2. the squares-and-circles program, recorded
         # recorded until the program is done (its length in host time grows
@@ -101,7 +97,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         out["done_st"] = _wait_state(cb, {"done", "fault", "stopped"}, 30)
         out["t_done"] = time.monotonic() - t0
         time.sleep(0.5)
-        out["end_st"] = _status(cb)
+        out["end_st"] = cb.status()
         out["stats"] = cb.stats()
         stop_rec.set()
         th.join(timeout=30)
@@ -111,11 +107,11 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         # 3. ampctl stop in the middle of the square: decelerate along the path, hold
         cb.ampctl(f"run {SQUARES_CIRCLES}")
         time.sleep(1.5)
-        out["before_stop"] = _status(cb)
+        out["before_stop"] = cb.status()
         out["stop_out"] = cb.ampctl("stop")
         out["stop_st"] = _wait_state(cb, {"stopped", "done", "fault"}, 10)
         time.sleep(0.5)
-        out["stop_st2"] = _status(cb)
+        out["stop_st2"] = cb.status()
         out["stop_stats"] = cb.stats()
         out["servod_log"] = cb.sh(f"cat {netboard.SERVOD_LOG}")
         out["board_s"] = time.monotonic() - t0

@@ -75,14 +75,6 @@ AXIS_LOG = re.compile(r"^axis(\d): can(\d) node (\d+): (.*?)(, fault,|,) error (
 
 
 
-def _status(cb: netboard.ControllerBoard) -> dict[str, str]:
-    return cb.status()
-
-
-def _wait(cb: netboard.ControllerBoard, ok: Any, what: str, timeout: float) -> dict[str, str]:
-    return cb.wait_status(ok, timeout, what)
-
-
 def _window(lines: list[dict[str, int]]) -> tuple[dict[int, dict[str, int]], dict[int, dict[str, int]]]:
     """Per bus: the first statistics line with both drives operational and
     the last line (the window checked: start-up left out)."""
@@ -115,7 +107,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         cb.wait_telemetry()
         cb.ampctl("param set wd_limit 50")
         cb.ampctl("resume", expected_rc=None)
-        out["enabled"] = _wait(cb, _enabled, "every axis in operation enabled", 240)
+        out["enabled"] = cb.wait_status(_enabled, 240, "every axis in operation enabled")
         out["t_enabled"] = time.monotonic() - t0
         servo = cb.machine.uart(1) if cb.machine else None
         assert servo is not None
@@ -151,10 +143,10 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
 
     # the program on the drives
     out["run_rc"], out["run_out"] = cb.sh_rc(f"ampctl run {PROGRAM} 2>&1", timeout=60)
-    out["done_st"] = _wait(cb, lambda s: s.get("program.state") in {"done", "fault", "stopped"},
-                           "the program to end", 600)
+    out["done_st"] = cb.wait_status(lambda s: s.get("program.state") in {"done", "fault", "stopped"},
+                                    600, "the program to end")
     time.sleep(0.5)
-    out["end_st"] = _status(cb)
+    out["end_st"] = cb.status()
     out["stats"] = cb.stats()
 
     # at least SYNC_CYCLES cycles since the drives were enabled
@@ -167,7 +159,7 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
         assert time.monotonic() < deadline, f"{SYNC_CYCLES} SYNCs not reached: {last}"
         time.sleep(2)
     out["last"] = now
-    out["final_st"] = _status(cb)
+    out["final_st"] = cb.status()
 
     # bus off: the drive simulator shorts can1 for SHORT_MS; every frame is
     # destroyed, the controller goes bus off, the firmware restarts it and
@@ -175,14 +167,14 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
     # acknowledges it and the axes are enabled again
     short_axes = [a for a in range(AXES) if a // 2 == SHORT_BUS]
     out["short_ans"] = cb.drives(SHORT_BUS, f"bus-short {SHORT_MS}")
-    out["busoff_st"] = _wait(
-        cb, lambda st: all(st.get(f"axis{a}.error") == f"0x{CO_ERR_BUS_OFF:04x}" for a in short_axes),
-        f"axes {short_axes}: error 0x{CO_ERR_BUS_OFF:04x} (bus off)", 240)
+    out["busoff_st"] = cb.wait_status(
+        lambda st: all(st.get(f"axis{a}.error") == f"0x{CO_ERR_BUS_OFF:04x}" for a in short_axes),
+        240, f"axes {short_axes}: error 0x{CO_ERR_BUS_OFF:04x} (bus off)")
     # the retransmissions took bus time the frames after them wait for:
     # resume once the bus has caught up (guest time)
     cb.sh("sleep 0.5", timeout=120)
     cb.ampctl("resume", expected_rc=None)
-    out["busoff_enabled"] = _wait(cb, _enabled, "every axis enabled again after the bus off", 240)
+    out["busoff_enabled"] = cb.wait_status(_enabled, 240, "every axis enabled again after the bus off")
     # a statistics line of both buses from after the recovery
     n = len(canload.controller_stats(servo.output))
     deadline = time.monotonic() + 300
@@ -201,16 +193,16 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
             # the running program ends in fault, naming the drive
             cb.drives(b, f"fault {node} {kind}")
             cb.sh_rc(f"ampctl run {PROGRAM} 2>&1", timeout=60)
-            out["fault_prog"] = _wait(cb, lambda st: st.get("program.state") != "running",
-                                      "the program to end on the drive's fault", 240)
+            out["fault_prog"] = cb.wait_status(lambda st: st.get("program.state") != "running",
+                                               240, "the program to end on the drive's fault")
             out["faults"][axis] = out["fault_prog"]
         else:
             cb.drives(b, f"fault {node} {kind}")
-            out["faults"][axis] = _wait(
-                cb, lambda st, a=axis, c=code: st.get(f"axis{a}.error") == f"0x{c:04x}",
-                f"axis{axis}: error 0x{code:04x} ({kind})", 240)
+            out["faults"][axis] = cb.wait_status(
+                lambda st, a=axis, c=code: st.get(f"axis{a}.error") == f"0x{c:04x}",
+                240, f"axis{axis}: error 0x{code:04x} ({kind})")
         cb.ampctl("stop", expected_rc=None)
-    out["fault_st"] = _status(cb)
+    out["fault_st"] = cb.status()
     out["servo_log"] = servo.output
     out["servod_log"] = cb.sh(f"cat {netboard.SERVOD_LOG}")
 
