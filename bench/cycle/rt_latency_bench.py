@@ -254,9 +254,9 @@ def bench_images(board: qemu.Board, kernel: str, out_dir: Path) -> qemu.Images:
     of this benchmark's own whose /chosen spans both."""
     os.environ["SERVOAMP_KERNEL"] = kernel
     kdir = qemu.kernel_dir(kernel)
-    module = qemu.build_module(kdir)
+    modules = qemu.build_modules(kdir)
     firmware = qemu.build_test_firmware() + qemu.rpu_app_firmware(board)
-    base = qemu.build_initramfs(module, firmware, qemu.build_userland())
+    base = qemu.build_initramfs(modules, firmware, qemu.build_userland())
     res = subprocess.run([str(REPO / "linux/initramfs/build-rt-tests.sh"), "--print"],
                          text=True, stdout=subprocess.PIPE, check=True)
     overlay = Path(res.stdout.strip().splitlines()[-1])
@@ -598,6 +598,9 @@ def main() -> int:
                 done[kernel] = k
         result["resumed_from"] = {"partial": str(partial), "started": old.get("started"),
                                   "kernels": sorted(done)}
+        # the kept windows stay in the partial file whichever kernel saves
+        # next (they were lost when the other kernel's job saved first)
+        result["kernels"].update(done)
     result["started"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
         futures = {k: pool.submit(run_kernel, board, k, images[k], args.cycles, rates, loads, save, done.get(k))

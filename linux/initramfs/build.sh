@@ -1,16 +1,17 @@
 #!/usr/bin/env bash
 # Build the servoamp initramfs (gzip'ed newc cpio) for the Zynq-7000 guest.
 #
-#   linux/initramfs/build.sh [--module KO] [--firmware FILE]... [--bin FILE]... [--print]
+#   linux/initramfs/build.sh [--module KO]... [--firmware FILE]... [--bin FILE]... [--print]
 #
 # Contents: Debian's busybox-static:armhf as the whole userland, /init
-# (init.sh: mounts proc, sys, devtmpfs, debugfs, loads the remoteproc module,
+# (init.sh: mounts proc, sys, devtmpfs, debugfs, loads the modules,
 # runs a shell on the console ttyPS0), /usr/sbin/irqprio (irqprio.c: the
 # SCHED_FIFO priority of an interrupt's thread under PREEMPT_RT, run by /init
 # for the cycle interrupt), /usr/sbin/servoamp-net (net-up.sh:
 # eth0 up with 10.0.2.15/24 for QEMU user networking, run on demand, e.g. by
-# the recording tests before servod), the module given with --module in
-# /lib/modules/, every --firmware file in /lib/firmware/ (same name), and
+# the recording tests before servod), every module given with --module (the
+# remoteproc driver, the cycle interrupt's UIO driver) in /lib/modules/,
+# every --firmware file in /lib/firmware/ (same name), and
 # every --bin file (static armhf programs: servod, ampctl) in /usr/bin/, and
 # the G-code examples of the repository (examples/*.nc) in
 # /usr/share/servoamp/examples/ (`ampctl run /usr/share/servoamp/examples/...`).
@@ -24,14 +25,14 @@
 # The archive is built with the kernel's own gen_init_cpio (no root needed
 # for /dev/console) and cached under
 # ${SERVOAMP_CACHE:-$HOME/.cache/servoamp}/initramfs/<key>/ where key hashes
-# every input (busybox .deb, init.sh, this script, module, firmware files).
+# every input (busybox .deb, init.sh, this script, modules, firmware files).
 # build/initramfs.cpio.gz links to the current one.
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")" && pwd)
 repo=$(cd "$here/../.." && pwd)
 cache=${SERVOAMP_CACHE:-$HOME/.cache/servoamp}
-module=""
+modules=()
 firmware=()
 bins=()
 print=0
@@ -41,14 +42,14 @@ die() { printf '[initramfs] error: %s\n' "$*" >&2; exit 1; }
 
 while [ $# -gt 0 ]; do
 	case $1 in
-	--module) module=$(realpath "$2"); shift 2 ;;
+	--module) modules+=("$(realpath "$2")"); shift 2 ;;
 	--firmware) firmware+=("$(realpath "$2")"); shift 2 ;;
 	--bin) bins+=("$(realpath "$2")"); shift 2 ;;
 	--print) print=1; shift ;;
 	*) die "unknown argument: $1" ;;
 	esac
 done
-[ -z "$module" ] || [ -f "$module" ] || die "module $module not found"
+for f in "${modules[@]}"; do [ -f "$f" ] || die "module $f not found"; done
 for f in "${firmware[@]}"; do [ -f "$f" ] || die "firmware $f not found"; done
 for f in "${bins[@]}"; do [ -f "$f" ] || die "program $f not found"; done
 examples=()
@@ -85,7 +86,7 @@ flock -u 9
 # 2. Cache key over every input.
 key=$({
 	sha256sum "$deb" "$here/init.sh" "$here/net-up.sh" "$here/irqprio.c" "$0" | cut -d' ' -f1
-	[ -z "$module" ] || printf '%s %s\n' "$(sha256sum <"$module")" "$(basename "$module")"
+	for f in "${modules[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 	for f in "${firmware[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 	for f in "${bins[@]}"; do printf 'bin %s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 	for f in "${examples[@]}"; do printf 'example %s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
@@ -130,7 +131,9 @@ list=$stage/list
 	echo "file /init $here/init.sh 755 0 0"
 	echo "file /usr/sbin/servoamp-net $here/net-up.sh 755 0 0"
 	echo "file /usr/sbin/irqprio $stage/irqprio 755 0 0"
-	[ -z "$module" ] || echo "file /lib/modules/$(basename "$module") $module 644 0 0"
+	for f in "${modules[@]}"; do
+		echo "file /lib/modules/$(basename "$f") $f 644 0 0"
+	done
 	for f in "${firmware[@]}"; do
 		echo "file /lib/firmware/$(basename "$f") $f 644 0 0"
 	done

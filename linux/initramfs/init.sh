@@ -19,12 +19,14 @@ for m in /lib/modules/*.ko; do
 done
 
 # PREEMPT_RT (SERVOAMP_KERNEL=rt): every interrupt handler runs in a thread
-# irq/NN-NAME at SCHED_FIFO 50. The cycle interrupt's thread is the first
-# half of servod's wake-up (it wakes servod's read() on /dev/uioN): FIFO 81,
-# above servod's cycle thread (80) and every other interrupt thread (50:
+# irq/NN-NAME at SCHED_FIFO 50. The cycle interrupt's thread (its UIO
+# driver's own, linux/uio/servoamp_cycle_uio.c) is the first half of
+# servod's wake-up (it wakes servod's read() on /dev/uioN): FIFO 81, above
+# servod's cycle thread (80) and every other interrupt thread (50:
 # Ethernet, UART), so neither the network nor the console delays the cycle
 # (docs/cycle.md, "Priorities under PREEMPT_RT"). Linux runs on CPU0 only
-# (maxcpus=1). The default kernel has no interrupt threads: nothing to set.
+# (maxcpus=1). On the vanilla kernel that thread exists but never runs (the
+# hard interrupt wakes servod): its priority does not matter there.
 irqprio cycle-interrupt 81 || echo "servoamp: irqprio cycle-interrupt failed"
 
 # PREEMPT_RT prints kernel messages to the console from a kthread, after

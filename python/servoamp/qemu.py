@@ -222,12 +222,20 @@ def build_dtb(board: Board, ksrc: Path, initramfs: Path | None = None, out_dir: 
     return dtb
 
 
-def build_module(kdir: Path) -> Path:
-    """The out-of-tree remoteproc module (about 1 s)."""
+# The out-of-tree modules the board loads: linux/<folder>/ -> its module
+KERNEL_MODULES = {"remoteproc": "zynq_servo_rproc.ko", "uio": "servoamp_cycle_uio.ko"}
+
+
+def build_modules(kdir: Path) -> list[Path]:
+    """The out-of-tree modules (linux/kmod.mk; about 1 s each): the
+    remoteproc driver and the cycle interrupt's UIO driver."""
     key = next(l[4:] for l in (kdir / "info").read_text().splitlines() if l.startswith("key="))
-    out = REPO / "build/linux/remoteproc" / key
-    _run(["make", "-s", "-C", REPO / "linux/remoteproc", f"KDIR={kdir / 'obj'}", f"BUILD={out}"])
-    return out / "zynq_servo_rproc.ko"
+    out = []
+    for folder, ko in KERNEL_MODULES.items():
+        build = REPO / "build/linux" / folder / key
+        _run(["make", "-s", "-C", REPO / "linux" / folder, f"KDIR={kdir / 'obj'}", f"BUILD={build}"])
+        out.append(build / ko)
+    return out
 
 
 def build_test_firmware() -> list[Path]:
@@ -282,8 +290,10 @@ def build_userland() -> list[Path]:
     return [out / "servod", out / "ampctl"]
 
 
-def build_initramfs(module: Path, firmware: Sequence[Path], bins: Sequence[Path] = ()) -> Path:
-    cmd: list[str | Path] = [REPO / "linux/initramfs/build.sh", "--print", "--module", module]
+def build_initramfs(modules: Sequence[Path], firmware: Sequence[Path], bins: Sequence[Path] = ()) -> Path:
+    cmd: list[str | Path] = [REPO / "linux/initramfs/build.sh", "--print"]
+    for m in modules:
+        cmd += ["--module", m]
     for f in firmware:
         cmd += ["--firmware", f]
     for b in bins:
@@ -301,12 +311,12 @@ def prepare_images(
     plus rpu_app's ELF(s) when they exist.
     """
     kdir = kernel_dir()
-    module = build_module(kdir)
+    modules = build_modules(kdir)
     if firmware is None:
         firmware = build_test_firmware()
         if with_rpu_app:
             firmware = list(firmware) + rpu_app_firmware(board)
-    initramfs = build_initramfs(module, firmware, build_userland())
+    initramfs = build_initramfs(modules, firmware, build_userland())
     stub = build_stub(board)
     stub_icount = build_stub(board, park_wfe=False)
     dtb = build_dtb(board, kernel_source(kdir), initramfs)

@@ -114,3 +114,4 @@ def test_emu_images_alone(tree: Path) -> None:
     assert (build / "firmware" / BOARD / "rpu_app.elf").is_file()
     assert (build / "boards" / BOARD / "linux.dtb").is_file()
     assert list((build / "linux" / "remoteproc").glob("*/zynq_servo_rproc.ko"))
+    assert list((build / "linux" / "uio").glob("*/servoamp_cycle_uio.ko"))

@@ -80,19 +80,24 @@ def test_bindings_validate() -> None:
 def test_driver_checkpatch_clean() -> None:
     kdir = qemu.kernel_dir()
     script = qemu.kernel_source(kdir) / "scripts" / "checkpatch.pl"
-    for src in ("zynq_servo_rproc.c", "zynq_servo_rproc_check.h"):
+    sources = [("remoteproc", "zynq_servo_rproc.c"), ("remoteproc", "zynq_servo_rproc_check.h"),
+               ("uio", "servoamp_cycle_uio.c")]
+    for folder, src in sources:
         res = subprocess.run([str(script), "--no-tree", "--strict", "-f", src],
-                             cwd=REPO / "linux" / "remoteproc", capture_output=True, text=True)
+                             cwd=REPO / "linux" / folder, capture_output=True, text=True)
         assert "total: 0 errors, 0 warnings, 0 checks" in res.stdout, res.stdout
 
 
-def test_driver_builds_without_warnings(tmp_path: Path) -> None:
+@pytest.mark.parametrize("folder", sorted(qemu.KERNEL_MODULES))
+def test_driver_builds_without_warnings(folder: str, tmp_path: Path) -> None:
+    """Each module against the board's kernel (its build variant:
+    SERVOAMP_KERNEL) with -Werror (the kernel's default for W=0)."""
     kdir = qemu.kernel_dir()
-    res = subprocess.run(["make", "-C", str(REPO / "linux" / "remoteproc"), f"KDIR={kdir / 'obj'}", f"BUILD={tmp_path}"],
+    res = subprocess.run(["make", "-C", str(REPO / "linux" / folder), f"KDIR={kdir / 'obj'}", f"BUILD={tmp_path}"],
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stdout + res.stderr
     assert "warning" not in (res.stdout + res.stderr).lower(), res.stdout + res.stderr
-    assert (tmp_path / "zynq_servo_rproc.ko").exists()
+    assert (tmp_path / qemu.KERNEL_MODULES[folder]).exists()
 
 
 def test_network_entry_agrees(board: qemu.Board) -> None:
