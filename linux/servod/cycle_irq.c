@@ -56,7 +56,7 @@ int cycle_irq_wait(struct servod *sd, struct cycle_irq *irq, struct cycle_wake *
 	uint32_t ticks;
 
 	if (poll(&pfd, 1, 100) <= 0) {
-		/* idempotent in uio_pdrv_genirq */
+		/* idempotent in the UIO driver (linux/uio) */
 		ack_and_rearm(sd, irq);
 		return -1;
 	}
