@@ -7,6 +7,7 @@ idle and with Linux loaded (issue 23, item 2; printed, not asserted).
         [--kernels vanilla,rt] [--rates 1000,4000]
         [--loads idle,hackbench,cpu,net,recovery]
         [--json bench/results/rt_latency.json] [--jobs 2] [--resume]
+    .venv/bin/python bench/cycle/rt_latency_bench.py --merge A.json B.json... [--json OUT]
 
 ``--jobs 2`` boots both kernels at once (each QEMU runs on one host core:
 on two free cores the wall time halves). ``--resume`` keeps the windows an
@@ -527,6 +528,55 @@ def verdict(result: Mapping[str, Any]) -> str:
     return f"lower worst-case wake-up: {best} ({'; '.join(parts)})"
 
 
+class MergeError(ValueError):
+    """Parts that do not make one table."""
+
+
+def merge_results(parts: Sequence[tuple[str, Mapping[str, Any]]]) -> dict[str, Any]:
+    """One table from the results files of separate runs (``--merge``): a
+    kernel's rates taken apart and measured at once on two host cores, or
+    the windows of a kernel measured again after a change that concerns
+    only that kernel. ``parts`` are (file name, its JSON). The parts must
+    agree on the cycles per window and the QEMU build; each (kernel, rate,
+    load) window may come from one part only. A kernel's own entries (its
+    release, thread table, build) come from the first part that has it;
+    every window keeps the build it was measured with. The sources are
+    listed in ``merged_from``; verdict and figures are computed again."""
+    if not parts:
+        raise MergeError("nothing to merge")
+    first = parts[0][1]
+    out: dict[str, Any] = {
+        "command": "bench/cycle/rt_latency_bench.py --merge " + " ".join(n for n, _ in parts),
+        "host": first.get("host"), "qemu": first.get("qemu"), "note": first.get("note"),
+        "cycles_per_window": first.get("cycles_per_window"), "kernels": {}, "merged_from": [],
+    }
+    origin: dict[tuple[str, str, str], str] = {}
+    for name, doc in parts:
+        if doc.get("partial"):
+            raise MergeError(f"{name}: a partial file (an interrupted run): finish it with --resume first")
+        if doc.get("cycles_per_window") != out["cycles_per_window"]:
+            raise MergeError(f"{name}: {doc.get('cycles_per_window')} cycles per window, "
+                             f"{parts[0][0]}: {out['cycles_per_window']}")
+        if doc.get("qemu") != out["qemu"]:
+            raise MergeError(f"{name}: another QEMU build than {parts[0][0]}'s")
+        out["merged_from"].append({"file": name, "command": doc.get("command"), "started": doc.get("started"),
+                                   "kernels": sorted(doc.get("kernels", {}))})
+        for kernel, k in doc.get("kernels", {}).items():
+            dst = out["kernels"].setdefault(kernel, {**{x: v for x, v in k.items() if x != "rates"}, "rates": {}})
+            for rate, r in k.get("rates", {}).items():
+                dr = dst["rates"].setdefault(rate, {**{x: v for x, v in r.items() if x != "windows"},
+                                                    "windows": {}})
+                for load, w in r.get("windows", {}).items():
+                    key = (kernel, rate, load)
+                    if key in origin:
+                        raise MergeError(f"{kernel} {rate} Hz {load}: in {origin[key]} and in {name}")
+                    origin[key] = name
+                    dr["windows"][load] = w
+    out["verdict"] = verdict(out)
+    out["figures"] = figures(out)
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cycles", type=int, default=10_000,
@@ -541,7 +591,21 @@ def main() -> int:
                     help="keep the windows of an interrupted run of the same --json (its partial file in "
                          "build/bench/rt_latency/), measured with the same --cycles, QEMU and kernel builds, "
                          "and measure only the others")
+    ap.add_argument("--merge", type=Path, nargs="+", metavar="RESULTS",
+                    help="measure nothing: write one table (--json) from the results files of separate "
+                         "runs (each window from one of them) and print it")
     args = ap.parse_args()
+    if args.merge:
+        try:
+            merged = merge_results([(str(p), json.loads(p.read_text())) for p in args.merge])
+        except (MergeError, OSError, json.JSONDecodeError) as e:
+            ap.error(f"--merge: {e}")
+        print(table_markdown(merged))
+        print(f"\n{merged['verdict']}")
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(merged, indent=2) + "\n")
+        print(f"written {args.json}")
+        return 0
     if args.jobs < 1:
         ap.error("--jobs: at least 1")
     loads = args.loads.split(",")

@@ -103,6 +103,31 @@ def test_table_and_figures(rb: ModuleType) -> None:
     assert v.startswith("lower worst-case wake-up: rt") and "vanilla: 2 missed" in v
 
 
+def test_merge_makes_one_table_of_separate_runs(rb: ModuleType) -> None:
+    def part(kernel: str, rate: str, loads: list[str], build: str) -> dict[str, Any]:
+        return {"command": f"run {kernel} {rate}", "started": "t", "cycles_per_window": 100, "qemu": {"key": "q"},
+                "kernels": {kernel: {"kernel": kernel, "build": {"initramfs_sha256": build},
+                                     "rates": {rate: {"period_us": 1_000_000 // int(rate),
+                                                      "windows": {ld: _window(0, [8800, 9000], 5) for ld in loads}}}}}}
+    a = part("vanilla", "1000", ["idle", "net"], "old")
+    b = part("rt", "1000", ["idle"], "new")
+    c = part("rt", "4000", ["idle", "net"], "new")
+    m = rb.merge_results([("a.json", a), ("b.json", b), ("c.json", c)])
+    assert list(m["kernels"]) == ["vanilla", "rt"] and list(m["kernels"]["rt"]["rates"]) == ["1000", "4000"]
+    assert m["kernels"]["rt"]["rates"]["4000"]["period_us"] == 250
+    assert [x["file"] for x in m["merged_from"]] == ["a.json", "b.json", "c.json"]
+    assert len(rb.table_rows(m)) == 5 and m["verdict"].startswith("lower worst-case wake-up")
+    assert {f["name"] for f in m["figures"]} >= {"vanilla_1khz_net_missed", "rt_4khz_net_wake_max"}
+    with pytest.raises(rb.MergeError, match="rt 4000 Hz idle: in c.json and in d.json"):
+        rb.merge_results([("c.json", c), ("d.json", part("rt", "4000", ["idle"], "x"))])
+    with pytest.raises(rb.MergeError, match="cycles per window"):
+        rb.merge_results([("a.json", a), ("b.json", {**b, "cycles_per_window": 200})])
+    with pytest.raises(rb.MergeError, match="QEMU"):
+        rb.merge_results([("a.json", a), ("b.json", {**b, "qemu": {"key": "other"}})])
+    with pytest.raises(rb.MergeError, match="partial"):
+        rb.merge_results([("a.json", {**a, "partial": True})])
+
+
 def test_committed_results_agree_with_their_windows(rb: ModuleType) -> None:
     path = TOP / "bench" / "results" / "rt_latency.json"
     if not path.exists():
