@@ -68,20 +68,29 @@ static irqreturn_t cycle_uio_thread(int irq, void *dev_id)
 	return IRQ_HANDLED;
 }
 
+/*
+ * Every change of @masked to true disables the line inside the lock, and
+ * every change to false enables it once, after the lock (enable_irq() is
+ * not called with interrupts off): an enable never comes before the
+ * disable it pairs with, so the line's disable depth stays 0 or 1.
+ */
 static int cycle_uio_irqcontrol(struct uio_info *info, s32 irq_on)
 {
 	struct cycle_uio *c = info->priv;
 	unsigned long flags;
+	bool enable = false;
 
 	raw_spin_lock_irqsave(&c->lock, flags);
 	if (irq_on && c->masked) {
 		c->masked = false;
-		enable_irq(c->irq);
+		enable = true;
 	} else if (!irq_on && !c->masked) {
 		c->masked = true;
 		disable_irq_nosync(c->irq);
 	}
 	raw_spin_unlock_irqrestore(&c->lock, flags);
+	if (enable)
+		enable_irq(c->irq);
 	return 0;
 }
 
