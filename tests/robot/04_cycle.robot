@@ -220,6 +220,21 @@ One Interrupt Per Cycle On Each Core
     Should Be True    abs(${n1} + ${miss} - ${ms}) <= 0.05 * ${ms} + 20
     Should Be True    abs(${scyc} + ${smiss} - ${ms}) <= 0.05 * ${ms} + 40
 
+Cycle Interrupt On Its Own Driver, Its Thread Above servod's
+    [Documentation]    The cycle interrupt is bound by servoamp's UIO driver
+    ...    (linux/uio/servoamp_cycle_uio.c), not uio_pdrv_genirq, and its
+    ...    interrupt thread runs at SCHED_FIFO 81 above servod's cycle
+    ...    thread (FIFO 80), the only other real-time thread servod has
+    ...    (docs/cycle.md, "Priorities under PREEMPT_RT"). On the vanilla
+    ...    kernel the thread exists too (it never runs there).
+    ${uio}=    Execute Shell Command    for d in /sys/class/uio/uio*; do echo "$(cat $d/name): $(cat $d/version)"; done
+    Should Contain    ${uio}    cycle-interrupt: servoamp-cycle-uio 1
+    # every real-time thread: comm (15 characters at most), rt_priority, policy (1 = SCHED_FIFO)
+    ${thr}=    Execute Shell Command    for p in /proc/[0-9]*/task/[0-9]*; do s=$(cut -d' ' -f40,41 $p/stat 2>/dev/null); case $s in ''|*' 0') ;; *) echo "$(cat $p/comm) $s";; esac; done; true
+    Log    ${thr}
+    Should Match Regexp    ${thr}    (?m)^irq/\\d+-cycle-\\S* 81 1$
+    Should Match Regexp    ${thr}    (?m)^servod 80 1$
+
 Parameter Round Trip For Every Parameter
     FOR    ${name}    ${value}    IN    &{TEST_PARAMS}
         Ampctl    param set ${name} ${value}
