@@ -86,8 +86,11 @@ def main() -> int:
     # bench/targets.toml
     figures = []
     for target, s in results.items():
+        note = ".text + .rodata"
+        if "-marm" in TARGETS[target]:
+            note += "; ARM state, for comparison: the firmware builds amp_lib as Thumb-2"
         figures.append({"name": f"code_{target}", "value": s["code"], "unit": "B", "better": "lower",
-                        "note": ".text + .rodata"})
+                        "note": note})
         figures.append({"name": f"data_bss_{target}", "value": s["data"] + s["bss"], "unit": "B",
                         "better": "lower"})
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
