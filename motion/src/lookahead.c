@@ -60,11 +60,25 @@ static double junction_limit(const struct lookahead *la, const double *u1,
 	return v;
 }
 
-static double reach(const struct lookahead *la, const struct seg *s, double v)
+/*
+ * The largest speed the segment reaches from v (entering or, the profiles
+ * being symmetric, leaving at v), capped at cap. When the transition from
+ * v to cap fits in the segment the answer is cap without solving for the
+ * reachable speed: with short segments the cap (a junction limit, the
+ * next segment's entry speed) binds in about 99 % of the calls, and the
+ * jerk-limited solve was most of the look-ahead's time (issue 24).
+ */
+static double reach_capped(const struct lookahead *la, const struct seg *s, double v,
+			   double cap)
 {
+	bool jerk = la->cfg->jerk_limited;
+
 	if (s->kind != SEG_MOVE)
-		return v;
-	return plan_reach(v, s->len, s->amax, s->jmax, la->cfg->jerk_limited);
+		return v < cap ? v : cap;
+	if (cap <= v || plan_trans_dist(v, cap, s->amax, s->jmax, jerk) <= s->len)
+		return cap;
+	double r = plan_reach(v, s->len, s->amax, s->jmax, jerk);
+	return r < cap ? r : cap;
 }
 
 #define WIN(la, i) (((la)->head + (i)) % (la)->W)
@@ -88,17 +102,14 @@ static void la_add(struct lookahead *la, uint32_t pos)
 	}
 	la->win[idx] = pos;
 	la->jl[idx] = jl;
-	double b = reach(la, s, 0.0); /* the newest segment ends at rest */
-	la->bwd[idx] = b < jl ? b : jl;
+	la->bwd[idx] = reach_capped(la, s, 0.0, jl); /* the newest ends at rest */
 	la->n = n + 1;
 	/* backward pass: raise the entry speeds the new exit allows; stop
 	 * where nothing changes any more */
 	for (uint32_t i = n; i-- > 0;) {
 		uint32_t k = WIN(la, i);
-		double nb = reach(la, seg_at(la->in, la->win[k]),
-				  la->bwd[WIN(la, i + 1)]);
-		if (nb > la->jl[k])
-			nb = la->jl[k];
+		double nb = reach_capped(la, seg_at(la->in, la->win[k]),
+					 la->bwd[WIN(la, i + 1)], la->jl[k]);
 		if (nb <= la->bwd[k])
 			break;
 		la->bwd[k] = nb;
@@ -115,10 +126,8 @@ static bool la_emit(struct lookahead *la)
 	const struct seg *s = seg_at(la->in, la->win[k]);
 	double v0 = la->fixed, v1 = 0;
 	if (s->kind == SEG_MOVE && la->n >= 2) {
-		v1 = la->bwd[WIN(la, 1)];
-		double f = reach(la, s, v0); /* forward pass */
-		if (f < v1)
-			v1 = f;
+		/* forward pass */
+		v1 = reach_capped(la, s, v0, la->bwd[WIN(la, 1)]);
 	}
 	if (s->kind != SEG_MOVE)
 		v0 = v1 = 0;
