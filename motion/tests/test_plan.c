@@ -166,6 +166,30 @@ static int t_peak_random(void)
 	return 0;
 }
 
+/* Short segments between nearly equal speeds, as on the benchmark's arcs
+ * (plan_peak's Newton in the smooth variable, peak_short()), and peaks
+ * whose speed change is near a^2/j (where that path hands over to
+ * fit_solve()). */
+static int t_peak_short(void)
+{
+	for (int i = 0; i < 100000; i++) {
+		double a = lrand(10.0, 1e5), j = lrand(1e2, 1e9), c = a * a / j;
+		double u = lrand(1e-2, 500.0), e = urand() < 0.1 ? 0.0 : lrand(1e-9, 1e-1);
+		double v0 = u * (1.0 - e), v1 = u * (1.0 + e);
+		double L = urand() < 0.5 ? lrand(1e-8, 1e-3) :
+			   /* a peak about c above the lower speed */
+			   two(v0, v0 + c * lrand(0.5, 2.0), v1 > v0 + c ? v0 : v1, a, j);
+		if (urand() < 0.5) {
+			double t = v0;
+			v0 = v1;
+			v1 = t;
+		}
+		if (check_peak(v0, v1, lrand(1.0, 4.0) * (u * (1.0 + e) + c), L, a, j))
+			return 1;
+	}
+	return 0;
+}
+
 static int t_peak_edges(void)
 {
 	const double a = 5000.0, j = 1e6;
@@ -192,6 +216,7 @@ static const struct test_case cases[] = {
 	{ "reach_random", t_reach_random },
 	{ "reach_edges", t_reach_edges },
 	{ "peak_random", t_peak_random },
+	{ "peak_short", t_peak_short },
 	{ "peak_edges", t_peak_edges },
 };
 
