@@ -29,9 +29,9 @@ double plan_trans_dist(double va, double vb, double a, double j, bool jerk)
  * acceleration limit, or one that does not), so a Newton iteration with a
  * starting point from the closed form converges in a few steps; it is kept
  * inside a bracket [feasible, infeasible] and falls back to bisection when
- * a step would leave it.  (plan_peak first tries peak_short(), Newton in
- * a variable where the distance is smooth.)  The answer is always on the feasible side: the
- * transitions of the returned speed fit in the length. */
+ * a step would leave it (plan_peak first tries peak_short(), Newton in a
+ * variable where the distance is smooth).  The answer is always on the
+ * feasible side: the transitions of the returned speed fit in the length. */
 
 struct fit_problem {
 	double u0, u1; /* the fixed speeds (reach: u1 unused) */
