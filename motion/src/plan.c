@@ -101,12 +101,6 @@ static double fit_solve(const struct fit_problem *p, double lo, double hi, doubl
 	return lo;
 }
 
-/* The end speed of a jerk-limited transition from v over exactly L, in
- * closed form: a transition that reaches a (speed change at least
- * c = a^2/j) is a quadratic in the end speed; a shorter one ends at
- * v + j h^2 with j h^3 + 2 v h = L (h: half its duration), a cubic whose
- * real root Cardano's formula gives.  Rounding can put it a few ulp on
- * either side of the true speed; it is a starting point for fit_solve(). */
 /* A cube root to about 1e-10 relative, for first guesses only (the C
  * library's cbrt() was a fifth of plan_peak's instructions): a third of
  * the exponent from the bits, then three Newton steps. */
@@ -125,6 +119,13 @@ static double cbrt_guess(double x)
 	return y;
 }
 
+/* The end speed of a jerk-limited transition from v over exactly L, in
+ * closed form: a transition that reaches a (speed change at least
+ * c = a^2/j) is a quadratic in the end speed; a shorter one ends at
+ * v + j h^2 with j h^3 + 2 v h = L (h: half its duration), a cubic whose
+ * real root Cardano's formula gives (its cube root by cbrt_guess(), to
+ * about 1e-10).  It can be on either side of the true speed; it is a
+ * starting point for fit_solve() and peak_short(). */
 static double reach_guess(double v, double L, double a, double j)
 {
 	double c = a * a / j;
@@ -211,6 +212,12 @@ static void trans_eval(const struct trans *t, double x, double *s, double *v)
 	}
 }
 
+/* The two jerk-limited transitions v0 -> w -> v1 fit in L. */
+static bool peak_fits(double v0, double w, double v1, double L, double a, double j)
+{
+	return plan_trans_dist(v0, w, a, j, true) + plan_trans_dist(w, v1, a, j, true) <= L;
+}
+
 /*
  * plan_peak's solve when both transitions are short at the answer (a speed
  * change under a^2/j: no constant-acceleration phase). With w = vhi + s^2
@@ -247,7 +254,7 @@ static double peak_short(double v0, double v1, double L, double a, double j, dou
 	if (!(w - vlo < a * a / j) || w > vmax)
 		return -1.0;
 	for (int k = 0; k < 4; k++) {
-		if (plan_trans_dist(v0, w, a, j, true) + plan_trans_dist(w, v1, a, j, true) <= L)
+		if (peak_fits(v0, w, v1, L, a, j))
 			return w;
 		w = nextafter(w, 0.0);
 	}
@@ -265,8 +272,7 @@ double plan_peak(const struct seg *g, double v0, double v1, bool jerk)
 		vp = sqrt((2.0 * a * L + v0 * v0 + v1 * v1) / 2.0);
 		if (vp > g->vmax)
 			vp = g->vmax;
-	} else if (plan_trans_dist(v0, g->vmax, a, j, true) +
-			   plan_trans_dist(g->vmax, v1, a, j, true) <= L) {
+	} else if (peak_fits(v0, g->vmax, v1, L, a, j)) {
 		vp = g->vmax;
 	} else {
 		/* first guess: with equal entry and exit speeds u the peak is
@@ -277,12 +283,12 @@ double plan_peak(const struct seg *g, double v0, double v1, bool jerk)
 		 * (Mean error of the guess on the benchmark's short arcs:
 		 * 0.8 % without the term, 0.12 % with it; 4.7 evaluations a
 		 * solve become 4.1.) */
-		double u = 0.5 * (v0 + v1), h = 0.5 * (vlo - (v0 < v1 ? v0 : v1));
+		double u = 0.5 * (v0 + v1), h = 0.5 * fabs(v1 - v0);
 		double guess = reach_guess(u, 0.5 * L, a, j);
 		if (guess > u)
 			guess += h * h / (4.0 * (guess - u));
 		const struct fit_problem p = { v0, v1, true, L, a, j };
-		if (plan_trans_dist(v0, vlo, a, j, true) + plan_trans_dist(vlo, v1, a, j, true) > L) {
+		if (!peak_fits(v0, vlo, v1, L, a, j)) {
 			vp = vlo; /* the pair alone does not fit */
 		} else {
 			vp = peak_short(v0, v1, L, a, j, g->vmax, guess);
