@@ -148,6 +148,11 @@ function readProblemsTab() {
   return { tab: tab ? tab.innerText.trim() : null, selected: tab?.getAttribute("aria-selected") === "true" };
 }
 
+// A parameter's row as it is on screen: ok once the row is there and its
+// value box shows a value. Studio keys each row by its value, so a new value
+// mounts a new row, whose box (@uiw/react-textarea-code-editor) is empty
+// for one frame: it copies its text in a passive effect, after the commit.
+// A read in that frame saw "" (CI, stop 30), which is no value at all.
 function readParameters(name) {
   const panel = document.querySelector('[data-testid="panel-mouseenter-container Parameters!params"]');
   if (!panel) return { ok: false, why: "no Parameters panel" };
@@ -156,7 +161,9 @@ function readParameters(name) {
     return { text: tr.innerText.trim(), input: ta ? ta.value : null };
   });
   const row = rows.find((r) => r.text.split(/\s/)[0] === name);
-  return { ok: row !== undefined, rows, row };
+  if (row === undefined) return { ok: false, why: `no row ${name}`, rows };
+  if (row.input !== null && row.input.trim() === "") return { ok: false, why: `row ${name} not drawn yet`, rows, row };
+  return { ok: true, rows, row };
 }
 
 // -- steps -----------------------------------------------------------------------------
@@ -296,7 +303,7 @@ try {
   };
   if (opt.good !== undefined) {
     setStage("set good");
-    const before = await page.evaluate(readParameters, opt.param);
+    const before = await waitFor(`the ${opt.param} row`, readParameters, opt.param);
     const tries = await setParam(opt.good);
     const after = await waitFor(`${opt.param} = ${opt.good} in the Parameters panel`, (a) => {
       const panel = document.querySelector('[data-testid="panel-mouseenter-container Parameters!params"]');
@@ -327,10 +334,10 @@ try {
     const end = Date.now() + TIMEOUT_MS;
     for (;;) {
       kept = await page.evaluate(readParameters, opt.param);
-      if (kept.row && Number(kept.row.input) !== Number(opt.bad)) break;
+      if (kept.ok && Number(kept.row.input) !== Number(opt.bad)) break;
       if (Date.now() > end) throw new Error(`${opt.param} still shows ${opt.bad}: ${JSON.stringify(kept)}`);
       const resetButton = row.getByRole("button", { name: "Reset" });
-      if (await resetButton.count()) {
+      if (kept.ok && await resetButton.count()) {
         await resetButton.click();
         reset = true;
       }
@@ -341,7 +348,7 @@ try {
     const refusedShot = opt.name === "host" ? "studio-param-refused.png" : `studio-${opt.name}-param-refused.png`;
     await page.screenshot({ path: path.join(opt.out, refusedShot), timeout: 60_000 });
   }
-  result.params_final = await page.evaluate(readParameters, opt.param);
+  result.params_final = await waitFor(`the ${opt.param} row`, readParameters, opt.param);
   setStage("done");
   fs.writeFileSync(path.join(opt.out, "result.json"), JSON.stringify({ stages: stageAt, ...result }, null, 1));
   emit({ event: "result", stages: stageAt, ...result });
