@@ -262,7 +262,7 @@ struct sched_figures {
 	double share[MOTION_N_TASKS];
 	/* the N-worker model (model_print()) */
 	double cost_ms[MOTION_N_TASKS]; /* CPU time per task, 1 worker */
-	double model[9], model_adj[9], model_one[9]; /* by workers, 1..8 */
+	double model[9], model_adj[9], model_one[9], model_acc[9]; /* by workers, 1..8 */
 };
 
 /* ---- the N-worker model ------------------------------------------------
@@ -270,18 +270,21 @@ struct sched_figures {
  * From the per-task costs of the 1-worker run (CPU time: each task's share
  * of the time in jobs times the run's CPU time, so that a preempted run
  * still gives its costs).  The serial tasks (decode, fit, look-ahead,
- * accel, sink) run on one core at a time (rule 1); the interpolation
- * lanes' work splits over min(N, lanes) cores.  Over a long program the
- * time on N workers is at least each of
+ * accel, sink) run on one core at a time (rule 1); the work of the profile
+ * lanes (peak0..) and of the interpolation lanes (interp0..) splits over
+ * min(N, lanes) cores.  Over a long program the time on N workers is at
+ * least each of
  *   W / N               (all the work over N cores),
  *   C_max               (the largest serial task),
- *   C_interp / lanes    (the interpolation, one lane per worker: lanes = N),
+ *   C_lanes / lanes     (each lane stage, one lane per worker: lanes = N),
  * and the model takes the largest (a critical-path bound for a pipeline
  * whose fill and drain are short against the run).  "Adjusted" inflates
  * every cost by f(N) = 1 + (i2 - 1)(N - 1), where i2 is the measured time
  * in jobs on 2 workers over 1 worker: each further core costs what the
  * second one did.  "One interp task" is the same bound with the
- * interpolation as one serial task (the design before the lanes). */
+ * interpolation as one serial task (the design before the interpolation
+ * lanes); "profiles in accel" with the profile lanes' work done by accel
+ * (the design before the profile lanes). */
 static double model_bound(double W, double cmax, double interp, unsigned n,
 			  unsigned lanes)
 {
@@ -296,7 +299,7 @@ static double model_bound(double W, double cmax, double interp, unsigned n,
 static void model_print(struct sched_figures *x, unsigned workers)
 {
 	const struct result *h1 = &x->cf[0].best;
-	double W = 0, cmax = 0, interp = 0;
+	double W = 0, cmax = 0, interp = 0, peak = 0, accel = 0;
 	const char *cmax_name = "?";
 
 	for (unsigned t = 0; t < h1->n_tasks; t++) {
@@ -305,32 +308,42 @@ static void model_print(struct sched_figures *x, unsigned workers)
 		W += c;
 		if (!strncmp(h1->names[t], "interp", 6)) {
 			interp += c;
+		} else if (!strncmp(h1->names[t], "peak", 4)) {
+			peak += c;
 		} else if (c > cmax) {
 			cmax = c;
 			cmax_name = h1->names[t];
 		}
+		if (!strcmp(h1->names[t], "accel"))
+			accel = c;
 	}
 	double i2 = workers >= 2 && x->inflation > 1 ? x->inflation : 1.0;
-	printf("  N-worker model from the 1-worker costs (CPU ms: total %.1f, largest serial task %s %.1f, interpolation %.1f over the lanes; i2 = %.2f):\n",
-	       W, cmax_name, cmax, interp, i2);
-	printf("    workers    ");
+	printf("  N-worker model from the 1-worker costs (CPU ms: total %.1f, largest serial task %s %.1f, profiles %.1f and interpolation %.1f over the lanes; i2 = %.2f):\n",
+	       W, cmax_name, cmax, peak, interp, i2);
+	printf("    workers          ");
 	for (unsigned n = 1; n <= 8; n++)
 		printf(" %5u", n);
-	printf("\n    bound      ");
+	printf("\n    bound            ");
 	for (unsigned n = 1; n <= 8; n++) {
 		x->model[n] = model_bound(W, cmax, interp, n, n);
 		printf(" %5.2f", x->model[n]);
 	}
-	printf("\n    adjusted   ");
+	printf("\n    adjusted         ");
 	for (unsigned n = 1; n <= 8; n++) {
 		x->model_adj[n] = x->model[n] / (1.0 + (i2 - 1.0) * (n - 1));
 		printf(" %5.2f", x->model_adj[n]);
 	}
-	printf("\n    one interp ");
+	printf("\n    one interp       ");
 	for (unsigned n = 1; n <= 8; n++) {
 		double c1 = interp > cmax ? interp : cmax;
 		x->model_one[n] = model_bound(W, c1, interp, n, 1);
 		printf(" %5.2f", x->model_one[n]);
+	}
+	printf("\n    profiles in accel");
+	for (unsigned n = 1; n <= 8; n++) {
+		double ca = accel + peak > cmax ? accel + peak : cmax;
+		x->model_acc[n] = model_bound(W, ca, interp, n, n);
+		printf(" %5.2f", x->model_acc[n]);
 	}
 	printf("\n");
 	if (workers <= 8)
@@ -552,9 +565,10 @@ static void json_sched(FILE *f, const struct sched_figures *x, double chord_um,
 	for (unsigned t = 0; t < h1->n_tasks; t++)
 		fprintf(f, "%s\"%s\": %.3f", t ? ", " : "", h1->names[t], x->cost_ms[t]);
 	fprintf(f, "},\n");
-	const char *mk[3] = { "model_bound", "model_adjusted", "model_one_interp_task" };
-	const double *mv[3] = { x->model, x->model_adj, x->model_one };
-	for (int k = 0; k < 3; k++) {
+	const char *mk[4] = { "model_bound", "model_adjusted", "model_one_interp_task",
+			      "model_profiles_in_accel" };
+	const double *mv[4] = { x->model, x->model_adj, x->model_one, x->model_acc };
+	for (int k = 0; k < 4; k++) {
 		fprintf(f, "    \"%s_speedup_1_to_8\": [", mk[k]);
 		for (unsigned n = 1; n <= 8; n++)
 			fprintf(f, "%s%.4f", n > 1 ? ", " : "", mv[k][n]);
@@ -719,8 +733,8 @@ int main(int argc, char **argv)
 			fprintf(f, "    {\"name\": \"model_speedup_4w_%s\", \"value\": %.4f, "
 				"\"unit\": \"x\", \"better\": \"higher\", \"note\": \"N-worker model from "
 				"the measured 1-worker task costs, lanes = workers (adjusted: %.2f; one "
-				"interp task: %.2f)\"},\n", kind, fig[i].model[4], fig[i].model_adj[4],
-				fig[i].model_one[4]);
+				"interp task: %.2f; profiles in accel: %.2f)\"},\n", kind, fig[i].model[4],
+				fig[i].model_adj[4], fig[i].model_one[4], fig[i].model_acc[4]);
 		}
 		fprintf(f, "    {\"name\": \"model_source_workload_4w\", \"value\": %.4f, "
 			"\"unit\": \"x\", \"better\": \"higher\", \"note\": \"the model (hybrid rules, event "

@@ -9,7 +9,7 @@
 #include "plan.h"
 
 void accel_init(struct accel *a, struct motion *m,
-		const struct motion_config *cfg, struct ring *in,
+		const struct motion_config *cfg, struct peaks *in,
 		struct interp *ip, const struct ring *segs)
 {
 	a->m = m;
@@ -30,7 +30,7 @@ void accel_init(struct accel *a, struct motion *m,
 static bool rest_ready(const struct accel *a)
 {
 	return a->cur_valid && a->tau > a->dur && a->v1 <= 1e-9 &&
-	       ring_count(a->in) == 0 && pipeline_rest_now(a->m);
+	       peaks_ready(a->in) == 0 && pipeline_rest_now(a->m);
 }
 
 void accel_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
@@ -38,7 +38,7 @@ void accel_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 	struct accel *a = arg;
 	const struct ring *out = &a->ip->lane[a->lane].in;
 
-	*ul = ring_count(a->in);
+	*ul = peaks_ready(a->in);
 	if (a->cur_valid && a->tau <= a->dur)
 		*ul += 1; /* samples of the current segment still to deal */
 	else if (rest_ready(a))
@@ -47,17 +47,15 @@ void accel_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 	*dcap = out->cap;
 }
 
-/* Makes a planned segment the current one: its peak speed and the
- * duration of its profile. */
+/* Makes a planned segment the current one: the profile from its three
+ * speeds (the peak speed from its profile lane) and its duration. */
 static void take(struct accel *a, const struct planned *in)
 {
-	const struct seg *g = seg_at(a->segs, in->seg);
-	double vp = in->kind == SEG_MOVE ? plan_peak(g, in->v0, in->v1, a->jerk) : 0.0;
-
 	a->seg = in->seg;
 	a->kind = in->kind;
 	a->v1 = in->v1;
-	plan_profile(&a->prof, g, in->v0, vp, in->v1, a->jerk);
+	plan_profile(&a->prof, seg_at(a->segs, in->seg), in->v0, in->vp, in->v1,
+		     a->jerk);
 	a->dur = a->prof.dur;
 	a->cur_valid = true;
 }
@@ -117,13 +115,13 @@ uint32_t accel_run(void *arg, unsigned worker)
 			done++;
 			continue;
 		}
-		const struct planned *in = ring_front(a->in);
+		const struct planned *in = peaks_front(a->in);
 		if (a->cur_valid) {
 			/* past the end of the current segment */
 			if (in && in->kind != SEG_END) {
 				a->tau -= a->dur;
 				take(a, in);
-				ring_release(a->in);
+				peaks_release(a->in);
 				done++;
 				taken++;
 				continue;
@@ -142,7 +140,7 @@ uint32_t accel_run(void *arg, unsigned worker)
 		if (!in)
 			break;
 		if (in->kind == SEG_END) {
-			ring_release(a->in);
+			peaks_release(a->in);
 			atomic_store(&ip->done, true);
 			pipeline_notify_end(a->m);
 			done++;
@@ -153,7 +151,7 @@ uint32_t accel_run(void *arg, unsigned worker)
 		atomic_fetch_add(&ip->active, 1);
 		a->tau = a->T;
 		take(a, in);
-		ring_release(a->in);
+		peaks_release(a->in);
 		done++;
 		taken++;
 	}

@@ -1,12 +1,13 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * The accel stage: the peak speed of each planned segment, between its
- * entry and exit speeds (plan_peak(): closed form for trapezoids, a
- * bracketed Newton iteration for S-curves); and the serial part of
- * interpolation (interp.h): the duration of the segment's profile, the
- * time of its first sample (carried over from the previous segment), the
- * choice at a stop between going on and a sample at rest, and the cut of
- * the samples into chunks dealt to the interpolation lanes in turn.
+ * The accel stage, between the profile lanes (peak.h: each segment's peak
+ * speed, taken back here in planning order) and the interpolation lanes:
+ * the timed profile of each segment from its three speeds (plan_profile())
+ * and the serial part of interpolation (interp.h): the duration of the
+ * profile, the time of its first sample (carried over from the previous
+ * segment), the choice at a stop between going on and a sample at rest,
+ * and the cut of the samples into chunks dealt to the interpolation lanes
+ * in turn.
  */
 #ifndef SERVOAMP_MOTION_ACCEL_H
 #define SERVOAMP_MOTION_ACCEL_H
@@ -18,11 +19,12 @@
 #include "interp.h"
 #include "motion/motion.h"
 #include "motion/ring.h"
+#include "peak.h"
 
 struct accel {
 	/* wiring, read-only after accel_init() */
 	struct motion *m;         /* for pipeline_rest_now() */
-	struct ring *in;          /* struct planned */
+	struct peaks *in;         /* struct planned, from the profile lanes */
 	struct interp *ip;        /* the lanes (their input rings) */
 	const struct ring *segs;  /* the segments the items refer to */
 	uint32_t batch, lanes, chunk, na;
@@ -41,7 +43,7 @@ struct accel {
 };
 
 void accel_init(struct accel *a, struct motion *m,
-		const struct motion_config *cfg, struct ring *in,
+		const struct motion_config *cfg, struct peaks *in,
 		struct interp *ip, const struct ring *segs);
 
 /* Scheduler task (arg: struct accel). */

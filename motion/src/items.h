@@ -4,7 +4,9 @@
  *
  *   stream bytes -> decode -> struct gc_block (gcode.h)
  *                -> fit    -> struct seg
- *                -> look-ahead -> struct planned
+ *                -> look-ahead -> struct planned (one ring per peak lane)
+ *                -> peak   -> struct planned with vp (one ring per lane, read
+ *                             in chunk order)
  *                -> accel  -> struct piece (one ring per interpolation lane)
  *                -> interp -> compact setpoint (int32 words, below; one
  *                             ring per lane, read in chunk order)
@@ -58,12 +60,13 @@ static inline const struct seg *seg_at(const struct ring *segs, uint32_t pos)
 	return ring_at(segs, pos);
 }
 
-/* A segment with its planned entry and exit speeds (look-ahead output):
- * the segment by reference (slot index in the segment ring). */
+/* A segment with its planned entry and exit speeds (look-ahead output)
+ * and its peak speed (set by a profile lane: peak.h): the segment by
+ * reference (slot index in the segment ring). */
 struct planned {
 	uint32_t seg;
 	uint8_t kind;
-	double v0, v1;
+	double v0, v1, vp;
 };
 
 /* Setpoints travel through their ring compactly, sized by the number of

@@ -12,7 +12,7 @@
 
 int lookahead_init(struct lookahead *la, const struct motion *m,
 		   const struct motion_config *cfg, struct ring *in,
-		   struct ring *out)
+		   struct peaks *out)
 {
 	la->cfg = cfg;
 	la->m = m;
@@ -118,7 +118,7 @@ static void la_add(struct lookahead *la, uint32_t pos)
 
 static bool la_emit(struct lookahead *la)
 {
-	struct planned *p = ring_slot(la->out);
+	struct planned *p = peaks_slot(la->out);
 
 	if (!p || la->n == 0)
 		return false;
@@ -135,7 +135,8 @@ static bool la_emit(struct lookahead *la)
 	p->kind = s->kind;
 	p->v0 = v0;
 	p->v1 = v1;
-	ring_commit(la->out);
+	p->vp = 0; /* set by the profile lane */
+	peaks_commit(la->out);
 	la->fixed = v1;
 	la->head = (la->head + 1) % la->W;
 	la->n--;
@@ -145,13 +146,13 @@ static bool la_emit(struct lookahead *la)
 /* The end marker, after the window was emitted to the last segment. */
 static bool la_emit_end(struct lookahead *la)
 {
-	struct planned *p = ring_slot(la->out);
+	struct planned *p = peaks_slot(la->out);
 
 	if (!p)
 		return false;
 	memset(p, 0, sizeof(*p));
 	p->kind = SEG_END;
-	ring_commit(la->out);
+	peaks_commit(la->out);
 	la->flushing = false;
 	la->prev_move = false;
 	la->fixed = 0;
@@ -183,8 +184,9 @@ void lookahead_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 	if (la->flushing && la->n == 0)
 		u += 1;
 	*ul = u;
-	*dl = ring_count(la->out);
-	*dcap = la->out->cap;
+	const struct ring *out = peaks_put_ring(la->out);
+	*dl = ring_count(out);
+	*dcap = out->cap;
 }
 
 uint32_t lookahead_run(void *arg, unsigned worker)

@@ -4,8 +4,9 @@
  * the segment ring) with the junction speed limit between each two and a
  * backward pass that raises entry speeds as far as the segments ahead can
  * still stop; the oldest segment leaves with its entry and exit speeds
- * (struct planned) when the window is full, at the end of the program, or
- * when the pipeline is starving (pipeline_starving()).
+ * (struct planned, dealt to the profile lanes: peak.h) when the window is
+ * full, at the end of the program, or when the pipeline is starving
+ * (pipeline_starving()).
  */
 #ifndef SERVOAMP_MOTION_LOOKAHEAD_H
 #define SERVOAMP_MOTION_LOOKAHEAD_H
@@ -15,13 +16,14 @@
 
 #include "motion/motion.h"
 #include "motion/ring.h"
+#include "peak.h"
 
 struct lookahead {
 	/* wiring, read-only after lookahead_init() */
 	const struct motion_config *cfg;
 	const struct motion *m; /* for pipeline_starving() */
 	struct ring *in;    /* struct seg */
-	struct ring *out;   /* struct planned */
+	struct peaks *out;  /* struct planned, to the profile lanes */
 	uint32_t na;
 	double T;
 	/* the window: segment-ring positions of the segments, their
@@ -38,7 +40,7 @@ struct lookahead {
 /* Setup (allocates the window); 0 or -1. */
 int lookahead_init(struct lookahead *la, const struct motion *m,
 		   const struct motion_config *cfg, struct ring *in,
-		   struct ring *out);
+		   struct peaks *out);
 void lookahead_free(struct lookahead *la);
 
 /* Scheduler task (arg: struct lookahead). */

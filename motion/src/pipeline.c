@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * The pipeline: stream -> decode -> fit -> look-ahead -> accel -> interp ->
- * setpoints, each stage a data-dependent task of the hybrid scheduler.
+ * The pipeline: stream -> decode -> fit -> look-ahead -> profile lanes ->
+ * accel -> interpolation lanes -> setpoints, each stage (each lane) a
+ * data-dependent task of the hybrid scheduler.
  * This file builds it (motion_create), answers the stages' questions
  * (pipeline.h), and holds the public calls that are not per cycle.
  */
@@ -121,7 +122,7 @@ bool pipeline_starving(const struct motion *m)
 			return true;
 	}
 	if (m->threaded && !m->cfg.drain_sink &&
-	    ring_count(&m->q[Q_PLANNED]) == 0 &&
+	    peaks_count(&m->pk) == 0 &&
 	    interp_in_count(&m->ip) == 0 &&
 	    interp_out_count(&m->ip) < interp_out_cap(&m->ip) / 4)
 		return true;
@@ -185,10 +186,12 @@ int motion_load_program(struct motion *m, const char *text, size_t len)
 	return 0;
 }
 
-/* The chain's queues; the last two are the interpolation lanes' rings, as
- * one queue each. */
+/* The chain's queues; "planned" is the profile lanes' rings, the last two
+ * are the interpolation lanes' rings, as one queue each. */
 static uint32_t queue_count(const struct motion *m, unsigned q)
 {
+	if (q == Q_PLANNED)
+		return peaks_count(&m->pk);
 	if (q == Q_PROFILES)
 		return interp_in_count(&m->ip);
 	if (q == Q_SETPOINTS)
@@ -198,6 +201,8 @@ static uint32_t queue_count(const struct motion *m, unsigned q)
 
 static uint32_t queue_cap(const struct motion *m, unsigned q)
 {
+	if (q == Q_PLANNED)
+		return peaks_cap(&m->pk);
 	if (q == Q_PROFILES)
 		return interp_in_cap(&m->ip);
 	if (q == Q_SETPOINTS)
@@ -207,6 +212,8 @@ static uint32_t queue_cap(const struct motion *m, unsigned q)
 
 static uint32_t queue_peak(const struct motion *m, unsigned q)
 {
+	if (q == Q_PLANNED)
+		return peaks_peak(&m->pk);
 	if (q == Q_PROFILES)
 		return interp_in_peak(&m->ip);
 	if (q == Q_SETPOINTS)
@@ -238,32 +245,38 @@ static uint32_t monitor_run(void *arg, unsigned worker)
 
 /* ---- setup ------------------------------------------------------------------ */
 
-static int make_rings(struct motion *m, const struct motion_config *cfg)
-{
-	return ring_init(&m->q[Q_BLOCKS], sizeof(struct gc_block), cfg->q_blocks) ||
-	       /* segments are referred to by their slot until interpolation
-		* is done with them: a slot is reused only after the segment
-		* ring, the look-ahead window, the planned queue and accel's
-		* current segment have all moved past it (the pieces dealt to
-		* the interpolation lanes carry a copy of their segment) */
-	       ring_init_slots(&m->q[Q_SEGS], seg_size(cfg->n_axes),
-			       cfg->q_segments,
-			       cfg->q_segments + cfg->lookahead + cfg->q_planned +
-				       4u) ||
-	       ring_init(&m->q[Q_PLANNED], sizeof(struct planned), cfg->q_planned);
-}
-
 /* A lane's ring: its share of the queue's capacity (at least 4 items), so
- * that the lanes together hold what the one interpolator's queue held. */
+ * that the lanes together hold what the one queue held (the profile lanes:
+ * in their input rings, and again in their output rings). */
 static uint32_t lane_cap(uint32_t q, uint32_t lanes)
 {
 	uint32_t c = q / lanes;
 	return c < 4 ? 4 : c;
 }
 
+static int make_rings(struct motion *m, const struct motion_config *cfg)
+{
+	uint32_t planned = 2u * cfg->interp_lanes * lane_cap(cfg->q_planned, cfg->interp_lanes);
+
+	return ring_init(&m->q[Q_BLOCKS], sizeof(struct gc_block), cfg->q_blocks) ||
+	       /* segments are referred to by their slot until interpolation
+		* is done with them: a slot is reused only after the segment
+		* ring, the look-ahead window, the profile lanes' rings and
+		* accel's current segment have all moved past it (the pieces
+		* dealt to the interpolation lanes carry a copy of their
+		* segment) */
+	       ring_init_slots(&m->q[Q_SEGS], seg_size(cfg->n_axes),
+			       cfg->q_segments,
+			       cfg->q_segments + cfg->lookahead + planned + 4u);
+}
+
 static const char *const lane_names[INTERP_MAX_LANES] = {
 	"interp0", "interp1", "interp2", "interp3",
 	"interp4", "interp5", "interp6", "interp7",
+};
+static const char *const peak_names[PEAK_MAX_LANES] = {
+	"peak0", "peak1", "peak2", "peak3",
+	"peak4", "peak5", "peak6", "peak7",
 };
 
 /* The scheduler's tasks: the stages in chain order, then the optional
@@ -280,16 +293,20 @@ static size_t task_table(struct motion *m, struct sched_task_desc *t)
 		.levels = fit_levels, .run = fit_run, .arg = &m->fit };
 	t[n++] = (struct sched_task_desc){ .name = "lookahead", .order = 2,
 		.levels = lookahead_levels, .run = lookahead_run, .arg = &m->la };
-	t[n++] = (struct sched_task_desc){ .name = "accel", .order = 3,
+	/* the profile lanes, then the interpolation lanes: one task each,
+	 * the lanes of a stage at the same place in the chain */
+	for (uint32_t k = 0; k < cfg->interp_lanes; k++)
+		t[n++] = (struct sched_task_desc){ .name = peak_names[k],
+			.order = 3, .levels = peak_levels, .run = peak_run,
+			.arg = &m->pk.lane[k] };
+	t[n++] = (struct sched_task_desc){ .name = "accel", .order = 4,
 		.levels = accel_levels, .run = accel_run, .arg = &m->acc };
-	/* the interpolation lanes: one task each, the same place in the
-	 * chain */
 	for (uint32_t k = 0; k < cfg->interp_lanes; k++)
 		t[n++] = (struct sched_task_desc){ .name = lane_names[k],
-			.order = 4, .levels = interp_levels, .run = interp_run,
+			.order = 5, .levels = interp_levels, .run = interp_run,
 			.arg = &m->ip.lane[k] };
 	if (cfg->drain_sink)
-		t[n++] = (struct sched_task_desc){ .name = "sink", .order = 5,
+		t[n++] = (struct sched_task_desc){ .name = "sink", .order = 6,
 			.levels = sink_levels, .run = sink_run, .arg = m };
 	if (cfg->send_cb)
 		t[n++] = (struct sched_task_desc){ .name = "send", .periodic = true,
@@ -338,14 +355,16 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	if (m->cfg.interp_lanes == 0)
 		m->cfg.interp_lanes = MOTION_DEFAULT_LANES;
 	if (stream_init(&m->src, cfg) || make_rings(m, cfg) ||
-	    lookahead_init(&m->la, m, cfg, &m->q[Q_SEGS], &m->q[Q_PLANNED]) ||
+	    peaks_init(&m->pk, cfg, &m->q[Q_SEGS],
+		       lane_cap(cfg->q_planned, m->cfg.interp_lanes)) ||
+	    lookahead_init(&m->la, m, cfg, &m->q[Q_SEGS], &m->pk) ||
 	    interp_init(&m->ip, m, cfg, &m->q[Q_SEGS], m->acc.issued,
 			lane_cap(cfg->q_profiles, m->cfg.interp_lanes),
 			lane_cap(cfg->q_setpoints, m->cfg.interp_lanes)))
 		goto nomem;
 	decode_init(&m->dec, m, cfg, &m->src, &m->q[Q_BLOCKS]);
 	fit_init(&m->fit, cfg, &m->q[Q_BLOCKS], &m->q[Q_SEGS]);
-	accel_init(&m->acc, m, cfg, &m->q[Q_PLANNED], &m->ip, &m->q[Q_SEGS]);
+	accel_init(&m->acc, m, cfg, &m->pk, &m->ip, &m->q[Q_SEGS]);
 	m->out.last.n_axes = (uint8_t)cfg->n_axes;
 	for (uint32_t k = 0; k < cfg->n_axes; k++)
 		m->out.last.pos[k] = to_inc(cfg->start_pos[k] * m->ipm);
@@ -381,6 +400,7 @@ void motion_destroy(struct motion *m)
 		ring_free(&m->q[q]);
 	stream_free(&m->src);
 	lookahead_free(&m->la);
+	peaks_free(&m->pk);
 	interp_free(&m->ip);
 	pthread_mutex_destroy(&m->fault.lock);
 	pthread_mutex_destroy(&m->end.lock);

@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * struct motion: the pipeline's context, made of one struct per stage
- * (stream.h, decode.h, fit.h, lookahead.h, accel.h, interp.h, cycle.h)
+ * (stream.h, decode.h, fit.h, lookahead.h, peak.h, accel.h, interp.h,
+ * cycle.h)
  * and the rings between them.  Only the pipeline's own files (pipeline.c,
  * cycle.c) see inside it; a stage sees its own struct and, through
  * pipeline.h, an opaque handle.
@@ -22,6 +23,7 @@
 #include "lookahead.h"
 #include "motion/motion.h"
 #include "motion/ring.h"
+#include "peak.h"
 #include "pipeline.h"
 #include "scheduler.h"
 #include "stream.h"
@@ -61,6 +63,7 @@ struct motion {
 	_Alignas(CL) struct decode dec;
 	_Alignas(CL) struct fit fit;
 	_Alignas(CL) struct lookahead la;
+	_Alignas(CL) struct peaks pk;
 	_Alignas(CL) struct accel acc;
 	_Alignas(CL) struct interp ip;
 	_Alignas(CL) struct consumer out; /* motion_next_setpoint or the sink */

@@ -61,26 +61,47 @@ struct sched_choice sched_decide(enum motion_policy policy,
 	return c;
 }
 
+/* The chain positions (O, 0..255) present in the snapshot, and those with
+ * a task running: a bit each. */
+struct order_bits {
+	uint64_t have[4], run[4];
+};
+
+static bool obit(const uint64_t *b, unsigned o)
+{
+	return (b[o >> 6] >> (o & 63)) & 1u;
+}
+
 void sched_gate(struct sched_dstate *d, size_t nd, uint32_t min_job)
 {
+	struct order_bits ob = { { 0 }, { 0 } };
+	bool any = false;
+
 	if (min_job <= 1)
 		return;
 	for (size_t i = 0; i < nd; i++) {
-		int up = -1, dn = -1;
+		ob.have[d[i].order >> 6] |= 1ull << (d[i].order & 63);
+		if (d[i].running) {
+			ob.run[d[i].order >> 6] |= 1ull << (d[i].order & 63);
+			any = true;
+		}
+	}
+	if (!any) /* one worker, or an idle pool: nothing to wait for */
+		return;
+	for (size_t i = 0; i < nd; i++) {
+		int up = d[i].order - 1, dn = d[i].order + 1;
 
 		if (d[i].running)
 			continue;
-		for (size_t k = 0; k < nd; k++) {
-			if (d[k].order < d[i].order &&
-			    (up < 0 || d[k].order > d[up].order))
-				up = (int)k;
-			if (d[k].order > d[i].order &&
-			    (dn < 0 || d[k].order < d[dn].order))
-				dn = (int)k;
-		}
-		if (up >= 0 && d[up].running && d[i].ul < min_job)
+		/* the neighbouring stages: the next smaller and the next
+		 * larger O present; a stage of lanes runs if one lane does */
+		while (up >= 0 && !obit(ob.have, (unsigned)up))
+			up--;
+		while (dn <= 255 && !obit(ob.have, (unsigned)dn))
+			dn++;
+		if (up >= 0 && obit(ob.run, (unsigned)up) && d[i].ul < min_job)
 			d[i].ul = 0;
-		if (dn >= 0 && d[dn].running && d[i].dl < d[i].dcap &&
+		if (dn <= 255 && obit(ob.run, (unsigned)dn) && d[i].dl < d[i].dcap &&
 		    d[i].dcap - d[i].dl < min_job)
 			d[i].dl = d[i].dcap;
 	}

@@ -26,7 +26,7 @@
 
 #include "motion/motion.h"
 
-#define SCHED_MAX_TASKS 16
+#define SCHED_MAX_TASKS MOTION_N_TASKS
 #define SCHED_MAX_WORKERS MOTION_MAX_WORKERS
 #define SCHED_MAX_LEVELS 16
 
@@ -58,10 +58,11 @@ struct sched_choice sched_decide(enum motion_policy policy,
 				 const struct sched_dstate *d, size_t nd);
 
 /* Whole jobs, a refinement of rule 2 (pure, applied to the snapshot before
- * sched_decide()).  While a task's upstream neighbour (next smaller O) is
- * running, "its upstream queue has data" means at least min_job items;
- * while its downstream neighbour is running, "its downstream queue has
- * room" means room for at least min_job items.  Otherwise rule 2 is
+ * sched_decide()).  While a task's upstream neighbour (a task at the next
+ * smaller O: one of the lanes when that stage has several) is running,
+ * "its upstream queue has data" means at least min_job items; while a
+ * downstream neighbour is running, "its downstream queue has room" means
+ * room for at least min_job items.  Otherwise rule 2 is
  * unchanged, so with no task running (one worker) it changes nothing, and
  * a task it holds back always has a running neighbour that will end its
  * job and let it go.  Without it, a worker left with little to do keeps

@@ -307,10 +307,13 @@ static int t_config(void)
 	c.interp_lanes = 0; /* the default */
 	CHECK(motion_create(&c, &m, &e) == 0, "0 lanes refused: %s", e.msg);
 	motion_get_stats(m, &s);
-	unsigned lanes = 0;
-	for (unsigned t = 0; t < s.n_tasks; t++)
+	unsigned lanes = 0, peaks = 0;
+	for (unsigned t = 0; t < s.n_tasks; t++) {
 		lanes += !strncmp(s.task_name[t], "interp", 6);
+		peaks += !strncmp(s.task_name[t], "peak", 4);
+	}
 	CHECK(lanes == MOTION_DEFAULT_LANES, "%u lane tasks", lanes);
+	CHECK(peaks == MOTION_DEFAULT_LANES, "%u profile lane tasks", peaks);
 	motion_destroy(m);
 	c.interp_lanes = MOTION_MAX_WORKERS;
 	c.drain_sink = true;
@@ -318,7 +321,10 @@ static int t_config(void)
 	c.trace_samples = 16;
 	CHECK(motion_create(&c, &m, &e) == 0, "8 lanes refused: %s", e.msg);
 	motion_get_stats(m, &s);
-	CHECK(s.n_tasks == 4 + MOTION_MAX_WORKERS + 1 + 1, "%u tasks", s.n_tasks);
+	/* decode, fit, look-ahead, accel, 8 profile lanes, 8 interpolation
+	 * lanes, sink, monitor: every slot of the stats but one */
+	CHECK(s.n_tasks == 4 + 2 * MOTION_MAX_WORKERS + 1 + 1, "%u tasks", s.n_tasks);
+	CHECK(s.n_tasks < MOTION_N_TASKS, "%u tasks", s.n_tasks);
 	motion_destroy(m);
 	return 0;
 }

@@ -426,7 +426,9 @@ static int t_gate_whole_jobs(void)
 }
 
 /* Whole jobs: properties over random snapshots, with the neighbours found
- * by sorting on O (a different way than sched_gate's). */
+ * by sorting on O (a different way than sched_gate's); one snapshot in
+ * three has lanes (tasks that share an O): a neighbouring stage runs when
+ * one of its lanes does. */
 static int t_gate_random(void)
 {
 	uint32_t s = 77;
@@ -439,6 +441,10 @@ static int t_gate_random(void)
 		bool any_running = false;
 
 		random_dstates(d, nd, &s, 10, 12, 3);
+		if (nd > 2 && rnd(&s, 3) == 0)
+			for (size_t i = 1; i < nd; i++)
+				if (rnd(&s, 3) == 0)
+					d[i].order = d[rnd(&s, (uint32_t)i)].order;
 		for (size_t i = 0; i < nd; i++)
 			any_running |= d[i].running;
 		/* chain order */
@@ -456,8 +462,16 @@ static int t_gate_random(void)
 		bool any_before = false, any_after = false;
 		for (size_t r = 0; r < nd; r++) {
 			size_t i = idx[r];
-			bool up_run = r > 0 && d[idx[r - 1]].running;
-			bool dn_run = r + 1 < nd && d[idx[r + 1]].running;
+			bool up_run = false, dn_run = false;
+			size_t a = r, b = r;
+			while (a > 0 && d[idx[a - 1]].order == d[i].order)
+				a--; /* the first of this stage's lanes */
+			while (b + 1 < nd && d[idx[b + 1]].order == d[i].order)
+				b++; /* the last */
+			for (size_t k = a; k-- > 0 && d[idx[k]].order == d[idx[a - 1]].order;)
+				up_run |= d[idx[k]].running;
+			for (size_t k = b + 1; k < nd && d[idx[k]].order == d[idx[b + 1]].order; k++)
+				dn_run |= d[idx[k]].running;
 			bool held_now = eligible(&d[i]) && mj > 1 &&
 					((up_run && d[i].ul < mj) ||
 					 (dn_run && d[i].dcap - d[i].dl < mj));

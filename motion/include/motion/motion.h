@@ -117,10 +117,12 @@ struct motion_config {
 				      (0: batch; 1: off, the hybrid scheduler's
 				      rule 2 as written); see docs/motion.md */
 	enum motion_policy policy;
-	/* data-parallel interpolation: lanes (tasks that interpolate at the
-	 * same time, 1..MOTION_MAX_WORKERS; 0: MOTION_DEFAULT_LANES) and
-	 * setpoints per chunk dealt to a lane in turn (0: batch).  The
-	 * setpoints do not depend on either; see docs/motion.md. */
+	/* data-parallel profiles and interpolation: lanes (tasks that solve
+	 * profiles, and tasks that interpolate, at the same time, each
+	 * 1..MOTION_MAX_WORKERS; 0: MOTION_DEFAULT_LANES) and setpoints per
+	 * chunk dealt to an interpolation lane in turn (0: batch; the
+	 * profile lanes take batch segments in turn).  The setpoints do not
+	 * depend on either; see docs/motion.md. */
 	uint32_t interp_lanes;
 	uint32_t interp_chunk;
 	/* threaded mode: optional periodic "position send" task run by the
@@ -182,9 +184,9 @@ int motion_wait(struct motion *m, uint32_t timeout_ms);
 
 #define MOTION_N_QUEUES 6   /* stream, blocks, segments, planned, profiles, setpoints */
 #define MOTION_MAX_WORKERS 8
-/* data tasks: decode, fit, look-ahead, accel, up to MOTION_MAX_WORKERS
- * interpolation lanes, sink; plus 2 periodic */
-#define MOTION_N_TASKS 16
+/* data tasks: decode, fit, look-ahead, up to MOTION_MAX_WORKERS profile
+ * lanes, accel, as many interpolation lanes, sink; plus 2 periodic */
+#define MOTION_N_TASKS 24
 #define MOTION_DEFAULT_LANES 2
 
 struct motion_stats {
