@@ -273,6 +273,49 @@ def result_files(results: Path, names: list[str]) -> list[tuple[str, Path]]:
 
 # ---- running ----------------------------------------------------------------
 
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "?"
+
+
+def _caches() -> dict[str, str]:
+    """cpu0's caches as the kernel lists them: {"L1d": "32K", "L2": "1024K", ...}."""
+    out: dict[str, str] = {}
+    for d in sorted(Path("/sys/devices/system/cpu/cpu0/cache").glob("index*")):
+        try:
+            level = (d / "level").read_text().strip()
+            kind = (d / "type").read_text().strip()
+            size = (d / "size").read_text().strip()
+        except OSError:
+            continue
+        if kind == "Instruction":
+            continue
+        out[f"L{level}{'d' if kind == 'Data' else ''}"] = size
+    return out
+
+
+def host_info() -> dict[str, Any]:
+    """What a results file is worth only together with: the machine it was
+    measured on (the ratios against a floor move with the CPU and its
+    caches: docs/amp-figures.md), and how busy it was at the end."""
+    return {"cpu": _cpu_model(), "cpus_online": os.cpu_count() or 0, "cache_cpu0": _caches(),
+            "kernel": os.uname().release, "loadavg_at_end": list(os.getloadavg()),
+            "utc_at_end": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+
+
+def stamp_host(path: Path) -> None:
+    """Adds "measured_on" (host_info()) to a results file a benchmark just wrote."""
+    doc = json.loads(path.read_text())
+    if isinstance(doc, dict):
+        doc["measured_on"] = host_info()
+        path.write_text(json.dumps(doc, indent=1) + "\n")
+
+
 def run_bench(b: Bench, results: Path, quick: bool, verbose: bool) -> tuple[bool, str]:
     if b.needs and not (REPO / b.needs).exists():
         return True, f"skipped: {b.needs} does not exist yet"
@@ -300,6 +343,10 @@ def run_bench(b: Bench, results: Path, quick: bool, verbose: bool) -> tuple[bool
                 rc = subprocess.call(cmd, cwd=REPO, env=env, stdout=lf, stderr=subprocess.STDOUT)
             if rc:
                 return False, f"failed (exit {rc}) after {time.monotonic() - t0:.0f} s: see {log}"
+    try:
+        stamp_host(out)
+    except (OSError, ValueError) as e:
+        return False, f"{out}: not a results file ({e})"
     return True, f"{time.monotonic() - t0:.0f} s, wrote {out.relative_to(REPO) if out.is_relative_to(REPO) else out}"
 
 

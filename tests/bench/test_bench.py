@@ -49,9 +49,14 @@ def test_quick_host_benchmarks_write_valid_figures_and_one_table(tmp_path: Path)
     p = _bench("--quick", "--results", tmp_path, *names)
     assert p.returncode == 0, p.stdout + p.stderr
     targets = bench.load_targets()
+    cpu = next(l.split(":", 1)[1].strip() for l in Path("/proc/cpuinfo").read_text().splitlines()
+               if l.startswith("model name"))
     for n in names:
         doc = json.loads((tmp_path / f"{n}.json").read_text())
         assert bench.validate(doc) == [], n
+        # the machine it was measured on, stamped by the runner
+        assert doc["measured_on"]["cpu"] == cpu and doc["measured_on"]["cpus_online"] == os.cpu_count(), doc
+        assert doc["measured_on"]["cache_cpu0"].get("L1d"), doc["measured_on"]
         # every figure of these three is in the table, with its status
         for f in doc["figures"]:
             line = next((l for l in p.stdout.splitlines() if l.split()[:2] == [n, f["name"]]), None)
