@@ -254,9 +254,11 @@ static uint32_t lane_cap(uint32_t q, uint32_t lanes)
 	return c < 4 ? 4 : c;
 }
 
+/* After peaks_init(): the segment ring's slots count the profile lanes'
+ * rings (peaks_cap()). */
 static int make_rings(struct motion *m, const struct motion_config *cfg)
 {
-	uint32_t planned = 2u * cfg->interp_lanes * lane_cap(cfg->q_planned, cfg->interp_lanes);
+	uint32_t planned = peaks_cap(&m->pk);
 
 	return ring_init(&m->q[Q_BLOCKS], sizeof(struct gc_block), cfg->q_blocks) ||
 	       /* segments are referred to by their slot until interpolation
@@ -354,9 +356,10 @@ int motion_create(const struct motion_config *cfg, struct motion **out,
 	init_locks(m);
 	if (m->cfg.interp_lanes == 0)
 		m->cfg.interp_lanes = MOTION_DEFAULT_LANES;
-	if (stream_init(&m->src, cfg) || make_rings(m, cfg) ||
+	if (stream_init(&m->src, cfg) ||
 	    peaks_init(&m->pk, cfg, &m->q[Q_SEGS],
 		       lane_cap(cfg->q_planned, m->cfg.interp_lanes)) ||
+	    make_rings(m, cfg) ||
 	    lookahead_init(&m->la, m, cfg, &m->q[Q_SEGS], &m->pk) ||
 	    interp_init(&m->ip, m, cfg, &m->q[Q_SEGS], m->acc.issued,
 			lane_cap(cfg->q_profiles, m->cfg.interp_lanes),
