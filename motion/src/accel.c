@@ -107,8 +107,10 @@ uint32_t accel_run(void *arg, unsigned worker)
 	struct interp *ip = a->ip;
 	uint32_t done = 0, taken = 0;
 
+	/* up to 2 * batch steps (a segment taken, a piece dealt), ending
+	 * after the last segment of a chunk of the profile lanes */
 	(void)worker;
-	while (done < a->batch) {
+	while (done < 2 * a->batch) {
 		if (a->cur_valid && a->tau <= a->dur) {
 			if (!deal(a, false))
 				break;
@@ -124,6 +126,8 @@ uint32_t accel_run(void *arg, unsigned worker)
 				peaks_release(a->in);
 				done++;
 				taken++;
+				if (peaks_get_chunk_done(a->in))
+					break;
 				continue;
 			}
 			if (a->v1 > 1e-9)
@@ -154,6 +158,8 @@ uint32_t accel_run(void *arg, unsigned worker)
 		peaks_release(a->in);
 		done++;
 		taken++;
+		if (peaks_get_chunk_done(a->in))
+			break;
 	}
 	atomic_fetch_add_explicit(&a->n_profiles, taken, memory_order_relaxed);
 	return done;

@@ -189,14 +189,18 @@ void lookahead_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 	*dcap = out->cap;
 }
 
+/* A job takes and emits up to batch segments each, and ends once it has
+ * dealt the last segment of a chunk: the profile lane that gets the chunk
+ * then finds all of it at once, in one job (and so does accel, which ends
+ * its jobs at the same boundaries). */
 uint32_t lookahead_run(void *arg, unsigned worker)
 {
 	struct lookahead *la = arg;
-	uint32_t done = 0;
-	uint32_t batch = la->cfg->batch;
+	uint32_t taken = 0, emitted = 0;
+	const uint32_t batch = la->cfg->batch;
 
 	(void)worker;
-	while (done < batch) {
+	while (taken < batch && emitted < batch) {
 		if (la_can_take(la)) {
 			const struct seg *s = ring_front(la->in);
 			if (s) {
@@ -205,23 +209,25 @@ uint32_t lookahead_run(void *arg, unsigned worker)
 				else
 					la_add(la, ring_front_pos(la->in));
 				ring_release(la->in);
-				done++;
+				taken++;
 				continue;
 			}
 		}
 		if (la_can_emit(la)) {
 			if (!la_emit(la))
 				break;
-			done++;
+			emitted++;
+			if (peaks_put_chunk_done(la->out))
+				break;
 			continue;
 		}
 		if (la->flushing && la->n == 0) {
 			if (!la_emit_end(la))
 				break;
-			done++;
+			emitted++;
 			continue;
 		}
 		break;
 	}
-	return done;
+	return taken + emitted;
 }

@@ -54,6 +54,11 @@ const struct ring *peaks_put_ring(const struct peaks *pk)
 	return &pk->lane[pk->put_lane].in;
 }
 
+bool peaks_put_chunk_done(const struct peaks *pk)
+{
+	return pk->put_fill == 0;
+}
+
 const struct planned *peaks_front(struct peaks *pk)
 {
 	return ring_front(&pk->lane[pk->get_lane].out);
@@ -68,6 +73,11 @@ void peaks_release(struct peaks *pk)
 uint32_t peaks_ready(const struct peaks *pk)
 {
 	return ring_count(&pk->lane[pk->get_lane].out);
+}
+
+bool peaks_get_chunk_done(const struct peaks *pk)
+{
+	return pk->get_fill == 0;
 }
 
 void peak_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)

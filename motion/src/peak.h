@@ -55,17 +55,21 @@ int peaks_init(struct peaks *pk, const struct motion_config *cfg,
 void peaks_free(struct peaks *pk);
 
 /* The look-ahead's side: the slot for the next planned segment (NULL when
- * its lane's ring is full), then commit it; the ring it deals to now. */
+ * its lane's ring is full), then commit it; the ring it deals to now;
+ * whether the last commit completed a chunk (or none was made yet). */
 struct planned *peaks_slot(struct peaks *pk);
 void peaks_commit(struct peaks *pk);
 const struct ring *peaks_put_ring(const struct peaks *pk);
+bool peaks_put_chunk_done(const struct peaks *pk);
 
 /* Accel's side: the next segment with its peak speed, in planning order
  * (NULL when it is not out of its lane yet), then release it; how many are
- * ready in the lane it takes from. */
+ * ready in the lane it takes from; whether the last release completed a
+ * chunk. */
 const struct planned *peaks_front(struct peaks *pk);
 void peaks_release(struct peaks *pk);
 uint32_t peaks_ready(const struct peaks *pk);
+bool peaks_get_chunk_done(const struct peaks *pk);
 
 /* Scheduler task, one per lane (arg: struct peak_lane). */
 void peak_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap);
