@@ -581,7 +581,7 @@ static void json_sched(FILE *f, const struct sched_figures *x, double chord_um,
 
 int main(int argc, char **argv)
 {
-	int blocks = 50000, arcs = 20000, reps = 5, batch = 1024, queue = 8192;
+	int blocks = 50000, arcs = 20000, reps = 10, batch = 1024, queue = 8192;
 	double chord_um = 0.2;
 	const char *only = NULL; /* one profile kind only */
 	unsigned workers = 2;

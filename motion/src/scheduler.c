@@ -107,15 +107,27 @@ void sched_gate(struct sched_dstate *d, size_t nd, uint32_t min_job)
 	}
 }
 
+/*
+ * Layout for several cores: every decision reads the state of every task,
+ * and the worker that decides has usually not written it itself.  So what a
+ * decision reads and the other workers write is kept small: the running
+ * flags in one cache line, the dispatch sequence (FIFO only) in another, the
+ * descriptors read-only after sched_create().  The per-job statistics are
+ * kept per worker, each worker's on lines of its own, and added up by
+ * sched_get_stats().
+ */
 struct task {
-	struct sched_task_desc d;
-	bool running;
-	uint64_t next_release; /* periodic */
-	uint64_t last;         /* data: dispatch sequence */
-	uint64_t runs[SCHED_MAX_WORKERS];
-	uint64_t items;
-	uint64_t overruns;
-	uint64_t busy_ns;
+	struct sched_task_desc d;  /* read-only after sched_create() */
+	uint64_t next_release;     /* periodic */
+	uint64_t overruns;         /* periodic */
+};
+
+/* One worker's statistics: written by that worker only (under s->lock). */
+struct wstats {
+	_Alignas(64) uint64_t runs[SCHED_MAX_TASKS];
+	uint64_t items[SCHED_MAX_TASKS];
+	uint64_t busy_ns[SCHED_MAX_TASKS];
+	uint64_t idle, job_ns, sleep_ns, life_ns;
 };
 
 struct worker {
@@ -131,17 +143,17 @@ struct sched {
 	size_t np, nd;
 	int pidx[SCHED_MAX_TASKS]; /* periodic -> task index */
 	int didx[SCHED_MAX_TASKS]; /* data -> task index */
-	pthread_mutex_t lock;
+	_Alignas(64) bool running[SCHED_MAX_TASKS];
+	_Alignas(64) uint64_t last[SCHED_MAX_TASKS]; /* data: dispatch sequence */
+	uint64_t seq;
+	_Alignas(64) pthread_mutex_t lock;
 	pthread_cond_t cond;
 	atomic_int waiting;
 	atomic_bool stop;
 	unsigned workers;
 	atomic_bool started;
 	struct worker w[SCHED_MAX_WORKERS];
-	uint64_t idle[SCHED_MAX_WORKERS];
-	uint64_t job_ns[SCHED_MAX_WORKERS], sleep_ns[SCHED_MAX_WORKERS];
-	uint64_t life_ns[SCHED_MAX_WORKERS];
-	uint64_t seq;
+	struct wstats ws[SCHED_MAX_WORKERS];
 	uint64_t t0;
 	uint32_t min_job;
 	/* trace */
@@ -165,9 +177,14 @@ struct sched *sched_create(enum motion_policy policy,
 
 	if (n == 0 || n > SCHED_MAX_TASKS)
 		return NULL;
-	s = calloc(1, sizeof(*s));
+	/* struct sched has cache-line aligned members: calloc() does not
+	 * promise that alignment */
+	s = aligned_alloc(_Alignof(struct sched),
+			  (sizeof(*s) + _Alignof(struct sched) - 1) /
+				  _Alignof(struct sched) * _Alignof(struct sched));
 	if (!s)
 		return NULL;
+	memset(s, 0, sizeof(*s));
 	s->policy = policy;
 	s->n = n;
 	s->t0 = mono_now_us();
@@ -286,19 +303,20 @@ static struct sched_choice decide_locked(struct sched *s, uint64_t now)
 	struct sched_dstate ds[SCHED_MAX_TASKS];
 
 	for (size_t i = 0; i < s->np; i++) {
-		struct task *t = &s->t[s->pidx[i]];
-		ps[i].prio = t->d.prio;
-		ps[i].ready = now >= t->next_release;
-		ps[i].running = t->running;
+		int ti = s->pidx[i];
+		ps[i].prio = s->t[ti].d.prio;
+		ps[i].ready = now >= s->t[ti].next_release;
+		ps[i].running = s->running[ti];
 	}
 	for (size_t i = 0; i < s->nd; i++) {
-		struct task *t = &s->t[s->didx[i]];
-		ds[i].order = t->d.order;
-		ds[i].running = t->running;
-		ds[i].last = t->last;
+		int ti = s->didx[i];
+		const struct sched_task_desc *d = &s->t[ti].d;
+		ds[i].order = d->order;
+		ds[i].running = s->running[ti];
+		ds[i].last = s->policy == MOTION_POLICY_FIFO ? s->last[ti] : 0;
 		ds[i].ul = ds[i].dl = ds[i].dcap = 0;
-		if (!t->running)
-			t->d.levels(t->d.arg, &ds[i].ul, &ds[i].dl, &ds[i].dcap);
+		if (!ds[i].running)
+			d->levels(d->arg, &ds[i].ul, &ds[i].dl, &ds[i].dcap);
 	}
 	sched_gate(ds, s->nd, s->min_job);
 	return sched_decide(s->policy, ps, s->np, ds, s->nd);
@@ -319,9 +337,9 @@ static int claim_locked(struct sched *s, struct sched_choice c, uint64_t now)
 		}
 	} else {
 		ti = s->didx[c.index];
-		s->t[ti].last = ++s->seq;
+		s->last[ti] = ++s->seq;
 	}
-	s->t[ti].running = true;
+	s->running[ti] = true;
 	return ti;
 }
 
@@ -330,9 +348,9 @@ static uint64_t next_release_locked(const struct sched *s)
 	uint64_t nr = UINT64_MAX;
 
 	for (size_t i = 0; i < s->np; i++) {
-		const struct task *t = &s->t[s->pidx[i]];
-		if (!t->running && t->next_release < nr)
-			nr = t->next_release;
+		int ti = s->pidx[i];
+		if (!s->running[ti] && s->t[ti].next_release < nr)
+			nr = s->t[ti].next_release;
 	}
 	return nr;
 }
@@ -346,7 +364,7 @@ struct sched_choice sched_step(struct sched *s)
 	pthread_mutex_lock(&s->lock);
 	c = decide_locked(s, now);
 	if (c.kind == SCHED_CHOICE_IDLE) {
-		s->idle[0]++;
+		s->ws[0].idle++;
 		pthread_mutex_unlock(&s->lock);
 		return c;
 	}
@@ -358,10 +376,10 @@ struct sched_choice sched_step(struct sched *s)
 	uint64_t b1 = mono_now_ns();
 
 	pthread_mutex_lock(&s->lock);
-	s->t[ti].busy_ns += b1 - b0;
-	s->t[ti].running = false;
-	s->t[ti].runs[0]++;
-	s->t[ti].items += items;
+	s->running[ti] = false;
+	s->ws[0].busy_ns[ti] += b1 - b0;
+	s->ws[0].runs[ti]++;
+	s->ws[0].items[ti] += items;
 	pthread_mutex_unlock(&s->lock);
 	return c;
 }
@@ -370,6 +388,7 @@ static void *worker_main(void *arg)
 {
 	struct worker *w = arg;
 	struct sched *s = w->s;
+	struct wstats *ws = &s->ws[w->id];
 	int prev = -1;
 	uint32_t prev_items = 0;
 	uint64_t prev_ns = 0;
@@ -378,11 +397,11 @@ static void *worker_main(void *arg)
 	pthread_mutex_lock(&s->lock);
 	for (;;) {
 		if (prev >= 0) {
-			s->t[prev].running = false;
-			s->t[prev].runs[w->id]++;
-			s->t[prev].items += prev_items;
-			s->t[prev].busy_ns += prev_ns;
-			s->job_ns[w->id] += prev_ns;
+			s->running[prev] = false;
+			ws->runs[prev]++;
+			ws->items[prev] += prev_items;
+			ws->busy_ns[prev] += prev_ns;
+			ws->job_ns += prev_ns;
 			prev = -1;
 			if (atomic_load(&s->waiting) > 0)
 				pthread_cond_broadcast(&s->cond);
@@ -402,11 +421,11 @@ static void *worker_main(void *arg)
 				wake = now + 2000u; /* safety poll */
 			struct timespec ts;
 			mono_deadline(&ts, (wake > now ? wake - now : 0) * 1000u);
-			s->idle[w->id]++;
+			ws->idle++;
 			uint64_t z0 = mono_now_ns();
 			int rc = pthread_cond_timedwait(&s->cond, &s->lock, &ts);
 			(void)rc;
-			s->sleep_ns[w->id] += mono_now_ns() - z0;
+			ws->sleep_ns += mono_now_ns() - z0;
 			atomic_fetch_sub(&s->waiting, 1);
 			continue;
 		}
@@ -418,7 +437,7 @@ static void *worker_main(void *arg)
 		prev_ns = mono_now_ns() - b0;
 		pthread_mutex_lock(&s->lock);
 	}
-	s->life_ns[w->id] += mono_now_ns() - born;
+	ws->life_ns += mono_now_ns() - born;
 	pthread_mutex_unlock(&s->lock);
 	return NULL;
 }
@@ -484,17 +503,21 @@ void sched_get_stats(struct sched *s, struct sched_stats *st)
 	st->workers = s->workers ? s->workers : 1;
 	for (size_t i = 0; i < s->n; i++) {
 		st->name[i] = s->t[i].d.name;
-		memcpy(st->runs[i], s->t[i].runs, sizeof(st->runs[i]));
-		st->items[i] = s->t[i].items;
 		st->overruns[i] = s->t[i].overruns;
-		st->busy_ns[i] = s->t[i].busy_ns;
+		for (unsigned w = 0; w < SCHED_MAX_WORKERS; w++) {
+			st->runs[i][w] = s->ws[w].runs[i];
+			st->items[i] += s->ws[w].items[i];
+			st->busy_ns[i] += s->ws[w].busy_ns[i];
+		}
 	}
-	memcpy(st->idle, s->idle, sizeof(st->idle));
-	memcpy(st->job_ns, s->job_ns, sizeof(st->job_ns));
-	memcpy(st->sleep_ns, s->sleep_ns, sizeof(st->sleep_ns));
 	for (unsigned w = 0; w < SCHED_MAX_WORKERS; w++) {
-		uint64_t spent = s->job_ns[w] + s->sleep_ns[w];
-		st->sched_ns[w] = s->life_ns[w] > spent ? s->life_ns[w] - spent : 0;
+		const struct wstats *ws = &s->ws[w];
+		uint64_t spent = ws->job_ns + ws->sleep_ns;
+
+		st->idle[w] = ws->idle;
+		st->job_ns[w] = ws->job_ns;
+		st->sleep_ns[w] = ws->sleep_ns;
+		st->sched_ns[w] = ws->life_ns > spent ? ws->life_ns - spent : 0;
 	}
 	st->decisions = s->seq;
 	pthread_mutex_unlock(&s->lock);
