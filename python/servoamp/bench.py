@@ -71,7 +71,7 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           ("{python}", "bench/amp_footprint.py", "--json", "{json}"),
           ()),
     Bench("motion", "G-code pipeline: one-thread throughput, hybrid scheduler speed-up on 2 workers",
-          False, "30 s quiet, about 70 s on a busy host",
+          False, "about 50 s quiet, about 2 min on a busy host",
           (("make", "-s", "-C", "motion", "-j2", "host"),),
           ("build/motion/host/motion_bench", "--json", "{json}"),
           ("--blocks", "300", "--arcs", "200", "--reps", "1", "--chord", "1")),
