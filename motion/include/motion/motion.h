@@ -110,7 +110,8 @@ struct motion_config {
 	void *flow_user;
 	/* queue capacities (items) */
 	uint32_t q_blocks, q_segments, q_planned, q_profiles, q_setpoints;
-	uint32_t batch;            /* items per task job (8) */
+	uint32_t batch;            /* items per task job (8; the look-ahead's
+				      and accel's jobs: docs/motion.md) */
 	uint32_t min_job;          /* whole jobs: while a neighbour task runs,
 				      a task waits for this many items
 				      upstream / this much room downstream
