@@ -47,9 +47,11 @@ void accel_levels(void *arg, uint32_t *ul, uint32_t *dl, uint32_t *dcap)
 	*dcap = out->cap;
 }
 
-/* Makes a planned segment the current one: the profile from its three
- * speeds (the peak speed from its profile lane) and its duration. */
-static void take(struct accel *a, const struct planned *in)
+/* Makes the planned segment at the front of the profile lanes the current
+ * one: the profile from its three speeds (the peak speed from its lane) and
+ * its duration; then releases it.  true when it was the last of its
+ * chunk. */
+static bool take(struct accel *a, const struct planned *in)
 {
 	a->seg = in->seg;
 	a->kind = in->kind;
@@ -58,6 +60,8 @@ static void take(struct accel *a, const struct planned *in)
 		     a->jerk);
 	a->dur = a->prof.dur;
 	a->cur_valid = true;
+	peaks_release(a->in);
+	return peaks_get_chunk_done(a->in);
 }
 
 /* One piece into the current lane: the samples of the current segment
@@ -122,11 +126,10 @@ uint32_t accel_run(void *arg, unsigned worker)
 			/* past the end of the current segment */
 			if (in && in->kind != SEG_END) {
 				a->tau -= a->dur;
-				take(a, in);
-				peaks_release(a->in);
+				bool chunk_end = take(a, in);
 				done++;
 				taken++;
-				if (peaks_get_chunk_done(a->in))
+				if (chunk_end)
 					break;
 				continue;
 			}
@@ -154,11 +157,10 @@ uint32_t accel_run(void *arg, unsigned worker)
 		atomic_store(&ip->done, false);
 		atomic_fetch_add(&ip->active, 1);
 		a->tau = a->T;
-		take(a, in);
-		peaks_release(a->in);
+		bool chunk_end = take(a, in);
 		done++;
 		taken++;
-		if (peaks_get_chunk_done(a->in))
+		if (chunk_end)
 			break;
 	}
 	atomic_fetch_add_explicit(&a->n_profiles, taken, memory_order_relaxed);

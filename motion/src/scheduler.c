@@ -9,6 +9,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "motion/ring.h" /* RING_CACHELINE */
 #include "servoamp/mono_clock.h"
 
 struct sched_choice sched_decide(enum motion_policy policy,
@@ -124,7 +125,7 @@ struct task {
 
 /* One worker's statistics: written by that worker only (under s->lock). */
 struct wstats {
-	_Alignas(64) uint64_t runs[SCHED_MAX_TASKS];
+	_Alignas(RING_CACHELINE) uint64_t runs[SCHED_MAX_TASKS];
 	uint64_t items[SCHED_MAX_TASKS];
 	uint64_t busy_ns[SCHED_MAX_TASKS];
 	uint64_t idle, job_ns, sleep_ns, life_ns;
@@ -143,10 +144,10 @@ struct sched {
 	size_t np, nd;
 	int pidx[SCHED_MAX_TASKS]; /* periodic -> task index */
 	int didx[SCHED_MAX_TASKS]; /* data -> task index */
-	_Alignas(64) bool running[SCHED_MAX_TASKS];
-	_Alignas(64) uint64_t last[SCHED_MAX_TASKS]; /* data: dispatch sequence */
+	_Alignas(RING_CACHELINE) bool running[SCHED_MAX_TASKS];
+	_Alignas(RING_CACHELINE) uint64_t last[SCHED_MAX_TASKS]; /* data: dispatch sequence */
 	uint64_t seq;
-	_Alignas(64) pthread_mutex_t lock;
+	_Alignas(RING_CACHELINE) pthread_mutex_t lock;
 	pthread_cond_t cond;
 	atomic_int waiting;
 	atomic_bool stop;
@@ -178,10 +179,9 @@ struct sched *sched_create(enum motion_policy policy,
 	if (n == 0 || n > SCHED_MAX_TASKS)
 		return NULL;
 	/* struct sched has cache-line aligned members: calloc() does not
-	 * promise that alignment */
-	s = aligned_alloc(_Alignof(struct sched),
-			  (sizeof(*s) + _Alignof(struct sched) - 1) /
-				  _Alignof(struct sched) * _Alignof(struct sched));
+	 * promise that alignment (its size is a multiple of it, as every
+	 * type's is) */
+	s = aligned_alloc(_Alignof(struct sched), sizeof(*s));
 	if (!s)
 		return NULL;
 	memset(s, 0, sizeof(*s));
@@ -343,6 +343,16 @@ static int claim_locked(struct sched *s, struct sched_choice c, uint64_t now)
 	return ti;
 }
 
+/* Under s->lock: the bookkeeping of a finished job of task ti. */
+static void job_done_locked(struct sched *s, struct wstats *ws, int ti,
+			    uint32_t items, uint64_t ns)
+{
+	s->running[ti] = false;
+	ws->runs[ti]++;
+	ws->items[ti] += items;
+	ws->busy_ns[ti] += ns;
+}
+
 static uint64_t next_release_locked(const struct sched *s)
 {
 	uint64_t nr = UINT64_MAX;
@@ -376,10 +386,7 @@ struct sched_choice sched_step(struct sched *s)
 	uint64_t b1 = mono_now_ns();
 
 	pthread_mutex_lock(&s->lock);
-	s->running[ti] = false;
-	s->ws[0].busy_ns[ti] += b1 - b0;
-	s->ws[0].runs[ti]++;
-	s->ws[0].items[ti] += items;
+	job_done_locked(s, &s->ws[0], ti, items, b1 - b0);
 	pthread_mutex_unlock(&s->lock);
 	return c;
 }
@@ -397,10 +404,7 @@ static void *worker_main(void *arg)
 	pthread_mutex_lock(&s->lock);
 	for (;;) {
 		if (prev >= 0) {
-			s->running[prev] = false;
-			ws->runs[prev]++;
-			ws->items[prev] += prev_items;
-			ws->busy_ns[prev] += prev_ns;
+			job_done_locked(s, ws, prev, prev_items, prev_ns);
 			ws->job_ns += prev_ns;
 			prev = -1;
 			if (atomic_load(&s->waiting) > 0)
