@@ -83,6 +83,8 @@ int amp_linux_peer(const struct amp_linux *l)
 								  : AMP_E_PEER_ABSENT;
 	if (state == AMP_SSTATE_RUNNING || state == AMP_SSTATE_SAFESTOP)
 		return AMP_OK;
+	if (state == AMP_SSTATE_STOPPING)
+		return AMP_E_PEER_STOPPING;
 	/* FAULT, OFFLINE (the attach that wrote this epoch wrote RUNNING
 	 * before it, and nothing writes OFFLINE after: a stray write) or a
 	 * word that is no state at all: the peer is attached to this epoch
@@ -262,6 +264,13 @@ int amp_linux_cycle(struct amp_linux *l, const struct amp_cmd_axis *axes,
 	 * AMP_E_FEEDBACK, never AMP_OK (or a peer error, whose feedback
 	 * callers still use) over a run of refused reads. */
 	if (!l->peer_seen) {
+		l->wd.primed = 0;
+		return peer;
+	}
+	/* Stopping on request (remoteproc's stop, docs/amp-protocol.md
+	 * section 3): the heartbeat ends on purpose, no stall. The watchdog
+	 * starts afresh should the servo ever beat again in this epoch. */
+	if (peer == AMP_E_PEER_STOPPING) {
 		l->wd.primed = 0;
 		return peer;
 	}

@@ -17,6 +17,7 @@ const char *amp_strerror(int err)
 	case AMP_E_NOSPC: return "payload too large";
 	case AMP_E_STALLED: return "peer stalled";
 	case AMP_E_FEEDBACK: return "no valid feedback";
+	case AMP_E_PEER_STOPPING: return "peer stopping on request";
 	default: return "unknown error";
 	}
 }

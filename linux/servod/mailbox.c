@@ -50,6 +50,9 @@ int mbox_request(struct servod *sd, uint32_t command, const void *req, uint32_t 
 		snprintf(msg, n, "servo not running (remoteproc %s, not attached to servod's region)",
 			 rproc_state(&sd->rproc));
 		return SE_OFFLINE;
+	case AMP_E_PEER_STOPPING:
+		snprintf(msg, n, "servo not running (stopping on request, remoteproc %s)", rproc_state(&sd->rproc));
+		return SE_OFFLINE;
 	case AMP_E_TIMEOUT:
 	case AMP_E_BUSY:
 		snprintf(msg, n, "servo did not answer within %d ms (%s)", MBOX_TIMEOUT_MS, amp_strerror(rc));

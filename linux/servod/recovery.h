@@ -64,6 +64,9 @@ struct recovery {
 	int foreign_logged;		/* latched and running: "not ours" said once */
 	int kernel_recovery_off;	/* remoteproc's own recovery disabled (supervisor.c) */
 	int crash_wait;			/* a crash was reported: the stop waits for "crashed" */
+	int backoff_powered;		/* BACKOFF began with the firmware powered (running) */
+	uint32_t stopped_attach;	/* the servo's attach_count when servod's restart stopped it */
+	uint32_t stopping_logged;	/* attach_count + 1 whose "stopping on request" was logged */
 };
 
 /* Restarts begun within the window that ends at at_ns. */

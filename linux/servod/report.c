@@ -14,6 +14,7 @@ static const char *sstate_name(uint32_t s)
 	case AMP_SSTATE_RUNNING: return "RUNNING";
 	case AMP_SSTATE_SAFESTOP: return "SAFESTOP";
 	case AMP_SSTATE_FAULT: return "FAULT";
+	case AMP_SSTATE_STOPPING: return "STOPPING";
 	default: return "?";
 	}
 }

@@ -23,6 +23,8 @@ enum session_state session_next(enum session_state s, enum session_event ev)
 		return s == SESSION_OPEN || s == SESSION_RUNNING || s == SESSION_RECOVERING ? SESSION_FAULT : s;
 	case SEV_RESET:
 		return s == SESSION_FAULT ? SESSION_RECOVERING : s;
+	case SEV_STOPPED:
+		return s == SESSION_RUNNING || s == SESSION_RECOVERING ? SESSION_CLOSED : s;
 	}
 	return s;
 }

@@ -41,6 +41,9 @@ enum session_event {
 	SEV_ATTACHED,		/* the servo attached and has the parameter set */
 	SEV_LATCHED,		/* one restart too many within the window: the fault latch */
 	SEV_RESET,		/* the operator's `ampctl fault reset`: restart */
+	SEV_STOPPED,		/* stopped on request (remoteproc "offline" while a
+				 * restart waited for the attach or its retry): the
+				 * recovery abandoned, a new session for the next start */
 };
 
 /* What the cycle thread saw (session.stall_pending): 0 nothing. */

@@ -40,6 +40,9 @@ static void open_session(struct servod *sd, const char *rs)
 		session_event(ss, SEV_REGION_READY);
 		ss->epoch = sd->amp.epoch;
 		ss->restored_attach = 0;
+		/* a stall the cycle thread saw in the session before (the
+		 * operator's stop came first) is not the next firmware's */
+		atomic_store(&ss->stall_pending, 0);
 		cycle_stats_new_session(&sd->stats);
 	}
 	pthread_mutex_unlock(&sd->lock);
@@ -172,6 +175,16 @@ static void latched_pass(struct servod *sd, const char *rs)
 	}
 }
 
+/* A restart's stop is next: which attach servod itself stops. */
+static void note_stop_phase(struct servod *sd)
+{
+	struct amp_peer_info pi = { 0 };
+
+	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
+	sd->recovery.stopped_attach = pi.attach_count;
+	sd->recovery.phase = RESTART_STOP;
+}
+
 /* A restart begins now (its stop next), or the fault latches: 1 or 0. */
 static int begin_restart(struct servod *sd, const char *rs, uint64_t now, const char *cause)
 {
@@ -183,7 +196,7 @@ static int begin_restart(struct servod *sd, const char *rs, uint64_t now, const 
 	}
 	recovery_note_restart(r, now);
 	r->restart++;
-	r->phase = RESTART_STOP;
+	note_stop_phase(sd);
 	r->phase_ns = now;
 	return 1;
 }
@@ -216,9 +229,36 @@ static void restart_failed(struct servod *sd, const char *rs, const char *fmt, .
 	}
 	r->phase = RESTART_BACKOFF;
 	r->retry_ns = retry;
+	r->backoff_powered = rs_powered(rproc_state(&sd->rproc));
 	logw(sd, "recovery: %s: retry in %s (%u of %u restarts within %s used)", cause,
 	     secs(b, sizeof(b), wait / 1000000u), recovery_in_window(r, c, now), c->limit,
 	     secs(w, sizeof(w), c->window_ms));
+}
+
+/*
+ * A stop on request, not a crash (docs/cycle.md, "Stop and recovery"):
+ * the firmware's state word says STOPPING (it writes that when it sees
+ * remoteproc's stop, before its heartbeat ends), or remoteproc, read
+ * again now, says "offline" (a driver that powers the core down without
+ * asking the firmware: the heartbeat stood still because the operator
+ * stopped it). With remoteproc's own recovery off, a crash leaves
+ * "crashed", never "offline". Never counted, never restarted.
+ */
+static int stopped_on_request(struct servod *sd, const char **rs, char *what, size_t n)
+{
+	struct amp_peer_info pi = { 0 };
+
+	*rs = rproc_state(&sd->rproc);
+	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
+	if (pi.epoch == sd->amp.epoch && pi.state == AMP_SSTATE_STOPPING) {
+		snprintf(what, n, "the firmware says it is stopping on request (remoteproc: %s)", *rs);
+		return 1;
+	}
+	if (rs_is(*rs, "offline")) {
+		snprintf(what, n, "remoteproc says offline: stopped through remoteproc");
+		return 1;
+	}
+	return 0;
 }
 
 /* The cycle thread saw the servo's heartbeat stand still, or its state
@@ -231,7 +271,7 @@ static void report_stall(struct servod *sd, int why, const char *rs)
 {
 	struct amp_peer_info pi = { 0 };
 	uint64_t now = mono_now_ns();
-	char path[600], cause[200];
+	char path[600], cause[200], what[120];
 
 	if (why == STALL_PEER_ERROR) {
 		(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
@@ -245,6 +285,13 @@ static void report_stall(struct servod *sd, int why, const char *rs)
 	} else {
 		snprintf(cause, sizeof(cause), "servo stalled (heartbeat still for %u cycles)",
 			 sd->pset[SP_P_wd_limit]);
+	}
+	/* remoteproc and the firmware asked again before anything is
+	 * reported (not while servod's own restart stops and starts it) */
+	if ((sd->recovery.phase == RESTART_NONE || sd->recovery.phase == RESTART_ATTACH) &&
+	    stopped_on_request(sd, &rs, what, sizeof(what))) {
+		logm(sd, "%s, but %s: not a crash, not restarted", cause, what);
+		return;
 	}
 	if (session_recovering(&sd->session)) {
 		logw(sd, "%s: the restarted firmware stalled before its parameter set was loaded", cause);
@@ -267,6 +314,41 @@ static void report_stall(struct servod *sd, int why, const char *rs)
 	cycle_stats_publish(&sd->stats, &sd->pub);
 	pthread_mutex_unlock(&sd->lock);
 	(void)begin_restart(sd, rs, now, cause);
+}
+
+/*
+ * RECOVERING, and remoteproc says "offline" though servod did not stop the
+ * firmware: while a restarted firmware is awaited (servod's start
+ * succeeded) or a failed one waits for its retry (it was left powered),
+ * only a stop through remoteproc's state takes it offline. The operator's
+ * stop ends the recovery: nothing restarted, nothing counted. 1 if so.
+ */
+static int stopped_while_recovering(struct servod *sd, const char *rs)
+{
+	struct recovery *r = &sd->recovery;
+
+	struct amp_peer_info pi = { 0 };
+
+	if (!rs_is(rs, "offline"))
+		return 0;
+	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
+	/* awaited: the restarted firmware attached (another attach than the
+	 * one servod stopped) and said it stops on request; without that
+	 * word (stopped before its attach, or a driver that powers it down
+	 * unasked) "offline" is a failed restart, retried */
+	if (r->phase == RESTART_ATTACH &&
+	    !(pi.epoch == sd->amp.epoch && pi.state == AMP_SSTATE_STOPPING && pi.attach_count != r->stopped_attach))
+		return 0;
+	if (r->phase != RESTART_ATTACH && !(r->phase == RESTART_BACKOFF && r->backoff_powered))
+		return 0;
+	logm(sd, "servo stopped through remoteproc during recovery (restart %u, %s): recovery abandoned, "
+		 "not restarted", r->restart, recovery_phase_name(r->phase));
+	r->phase = RESTART_NONE;
+	r->failed = 0;
+	r->restart = 0;
+	r->by_reset = 0;
+	event_locked(sd, SEV_STOPPED);
+	return 1;
 }
 
 /* RECOVERING: one step of the restart, at most one write to remoteproc's
@@ -410,13 +492,18 @@ void supervise(struct servod *sd)
 	if (!strcmp(rs, "running"))
 		event_locked(sd, SEV_SEEN_RUNNING);
 	if (!strcmp(rs, "offline") && ss->state == SESSION_RUNNING) {
+		(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
 		event_locked(sd, SEV_SEEN_OFFLINE);
-		logm(sd, "servo went offline");
+		logm(sd, "servo went offline%s", pi.epoch == ss->epoch && pi.state == AMP_SSTATE_STOPPING
+							   ? " (stopped on request: its last state word is STOPPING)"
+							   : "");
 		return;
 	}
 	why = atomic_exchange(&ss->stall_pending, 0);
 	if (why)
 		report_stall(sd, why, rs);
+	if (session_recovering(ss) && stopped_while_recovering(sd, rs))
+		return;
 	if (session_recovering(ss)) {
 		restart_step(sd, rs);
 		rs = rproc_state(&sd->rproc);	/* after a stop or a start */
@@ -427,6 +514,12 @@ void supervise(struct servod *sd)
 	peer = amp_linux_peer(&sd->amp);
 	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
 	pthread_mutex_unlock(&sd->lock);
+	if (peer == AMP_E_PEER_STOPPING && sd->recovery.stopping_logged != pi.attach_count + 1u &&
+	    (sd->recovery.phase == RESTART_NONE || sd->recovery.phase == RESTART_ATTACH)) {
+		sd->recovery.stopping_logged = pi.attach_count + 1u;
+		logm(sd, "servo stopping on request (its state word says STOPPING, remoteproc: %s): not a stall, "
+			 "not restarted", rs);
+	}
 	/* a restart takes the attach it waits for (ATTACH), not the one of a
 	 * firmware whose stall this pass made a failed restart (BACKOFF) */
 	if (peer == AMP_OK && pi.attach_count != ss->restored_attach && strcmp(rs, "running") == 0 &&
@@ -502,7 +595,7 @@ static int req_fault(struct servod *sd, struct out *o, int argc, char **argv, ch
 	recovery_clear(r);
 	r->by_reset = 1;
 	r->restart = 1;
-	r->phase = RESTART_STOP;
+	note_stop_phase(sd);
 	r->phase_ns = mono_now_ns();
 	pthread_mutex_lock(&sd->lock);
 	session_event(&sd->session, SEV_RESET);

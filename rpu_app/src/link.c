@@ -60,6 +60,10 @@ int link_attached(void)
 	return 0;
 }
 
+void link_stopping(void)
+{
+}
+
 uint32_t link_heartbeat(void)
 {
 	return local_hb;
@@ -549,6 +553,12 @@ void link_poll(uint32_t cycle, const struct link_stats *ls)
 int link_attached(void)
 {
 	return attached;
+}
+
+void link_stopping(void)
+{
+	if (attached)
+		amp_servo_set_state(&amp, AMP_SSTATE_STOPPING, 0);
 }
 
 uint32_t link_heartbeat(void)

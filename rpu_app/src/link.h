@@ -37,6 +37,10 @@ void link_poll(uint32_t cycle, const struct link_stats *ls);
 /* Cycle interrupt: the exchange (t_entry: global timer at handler entry). */
 void link_cycle(uint32_t t_entry, uint32_t lat_ns);
 int link_attached(void);
+/* A stop on request (remoteproc's STOP) seen: the servo line says
+ * STOPPING before the heartbeat ends, so that Linux never takes the stop
+ * for a stall (docs/amp-protocol.md section 3). Interrupts disabled. */
+void link_stopping(void);
 uint32_t link_heartbeat(void);
 const char *link_backend(void);
 

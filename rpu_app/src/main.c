@@ -231,6 +231,7 @@ static int stop_requested(void)
 __attribute__((noreturn)) void servo_quiesce_and_park(void)
 {
 	cpu_irq_disable();
+	link_stopping();	/* before the heartbeat ends: not a stall */
 	ttc_servo_stop();	/* Linux's cycle goes on (ttc.c) */
 	idle_timer_stop();
 #if HAVE_AMP_LIB

@@ -74,7 +74,7 @@ static void test_strerror(void)
 {
 	int codes[] = { AMP_OK, AMP_E_PEER_ABSENT, AMP_E_PEER_ERROR, AMP_E_TIMEOUT,
 			AMP_E_PROTO, AMP_E_INVAL, AMP_E_LAYOUT, AMP_E_BUSY,
-			AMP_E_NOSPC, AMP_E_STALLED, AMP_E_FEEDBACK };
+			AMP_E_NOSPC, AMP_E_STALLED, AMP_E_FEEDBACK, AMP_E_PEER_STOPPING };
 	size_t n = sizeof(codes) / sizeof(codes[0]);
 
 	for (size_t i = 0; i < n; i++) {
@@ -797,6 +797,37 @@ static void test_watchdog_any_peer_state(void)
 	CHECK_EQ(amp_linux_peer(&L), AMP_E_PEER_ABSENT);
 }
 
+/* The servo stops on request (remoteproc's stop): it writes STOPPING,
+ * then its heartbeat ends. Never a stall, however long remoteproc takes to
+ * say offline; a servo that beats again in this epoch (a restart) has its
+ * watchdog afresh. */
+static void test_stopping_is_no_stall(void)
+{
+	struct amp_cmd_axis a[1];
+	struct amp_rx_info rx;
+
+	fill_cmd(a, 1, 0);
+	fresh_pair(4);
+	beat_once();
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+	amp_servo_set_state(&S, AMP_SSTATE_STOPPING, 0);
+	CHECK_EQ(amp_linux_peer(&L), AMP_E_PEER_STOPPING);
+	for (int n = 0; n < 100; n++)
+		CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_E_PEER_STOPPING);
+	/* a mailbox call fails at once with the reason */
+	{
+		uint32_t w = 0;
+		struct amp_msg req = { 1u, 0, 4u, 4u, &w }, resp = { 0, 0, 0, 4u, &w };
+
+		CHECK_EQ(amp_linux_mbox_call(&L, &req, &resp, 1000), AMP_E_PEER_STOPPING);
+	}
+	/* restarted (attach 2, same epoch): watched again from its attach */
+	CHECK_EQ(amp_servo_attach(&S, ocm_buf, sizeof(ocm_buf)), AMP_OK);
+	beat_once();
+	CHECK_EQ(amp_linux_cycle(&L, a, 1, 0, &rx), AMP_OK);
+	CHECK_EQ(cycles_until_stalled(10, 0), 4);
+}
+
 /* A semaphore word that is neither IDLE nor BUSY (a stray write from
  * either core) is repaired by Linux and counted, never left to block the
  * exchange or the mailbox for good. */
@@ -869,6 +900,7 @@ int main(void)
 	test_wd_limit();
 	test_mbox_cancel();
 	test_watchdog_any_peer_state();
+	test_stopping_is_no_stall();
 	test_garbled_semaphores();
 	test_layout_constants();
 	return check_summary("amp_lib unit");

@@ -861,6 +861,143 @@ static void test_attach_inside_a_stalled_cycle(void)
 	rig_down();
 }
 
+/* ---- (5) an operator's stop is final (issue 33, item 1) ----------------------- */
+
+#ifndef AMP_SSTATE_STOPPING
+/* the amp_lib before this change: the word a firmware would write */
+#define AMP_SSTATE_STOPPING 0x53505453u
+#endif
+
+/* The firmware sees remoteproc's STOP (the Zynq-7000 driver's cooperative
+ * stop): with its word (STOPPING, then no heartbeat) or without it (a
+ * driver that powers the core down unasked). */
+static void fw_stop_on_request(int with_word)
+{
+	pthread_mutex_lock(&g.fw);
+	if (with_word)
+		amp_servo_set_state(&g.s, AMP_SSTATE_STOPPING, 0);
+	g.running = 0;
+	pthread_mutex_unlock(&g.fw);
+}
+
+/* Cycles servod has run (its cycle thread), under its lock. */
+static uint64_t servod_cycles(void)
+{
+	return stat_of(&g.sd->stats.cycles);
+}
+
+/* No pass of servod's main loop while the cycle thread runs n cycles: what
+ * a supervisor blocked elsewhere (a sysfs write) lets pile up. */
+static void cycles_without_passes(uint64_t n)
+{
+	uint64_t end = servod_cycles() + n;
+	struct timespec ts = { 0, 200000 };
+
+	for (int i = 0; i < 100000 && servod_cycles() < end; i++)
+		nanosleep(&ts, 0);
+}
+
+/* The operator's "start" through remoteproc's state, and its attach. */
+static void operator_start(uint64_t restores)
+{
+	wfile(g.dir, "state", "start");
+	rproc_play();
+	RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1, 10);
+	CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
+}
+
+static void test_operator_stop_is_final(void)
+{
+	char msg[512], body[4096];
+	uint64_t restores;
+	unsigned starts;
+
+	printf("servod recovery: the operator stops the firmware six times (limit 3), with and without its word\n");
+	rig_up(3, 50, 0);
+	for (int round = 0; round < 6; round++) {
+		int with_word = round % 3 != 2;
+
+		starts = g.starts;
+		restores = stat_of(&g.sd->stats.restores);
+		fw_stop_on_request(with_word);
+		/*
+		 * The sysfs write of "stop" blocks until the firmware parked
+		 * (with the word) or the core is powered down: remoteproc says
+		 * "running" meanwhile. The first three rounds make it last past
+		 * wd_limit (20) cycles with the word; the third round, the
+		 * stall is already seen when remoteproc says "offline", before
+		 * servod's next pass (the state re-read before a report).
+		 */
+		if (with_word) {
+			RUN_UNTIL(0, 0.05);	/* passes while the state says running */
+			cycles_without_passes(3u * 20u);
+			RUN_UNTIL(0, 0.05);
+		} else {
+			cycles_without_passes(3u * 20u);
+		}
+		fw_stop();
+		g.power = 0;
+		snprintf(g.kstate, sizeof(g.kstate), "offline");
+		wfile(g.dir, "state", g.kstate);
+		/* a new region at once: the operator's start follows without
+		 * a pass in between (nothing of the stopped firmware's, such
+		 * as a stall seen before the stop, may reach the new one) */
+		RUN_UNTIL(g.sd->session.state == SESSION_OPEN, 5);
+		printf("  round %d (%s): %u crash reports, %u starts, session %d\n", round,
+		       with_word ? "STOPPING" : "no word", g.reports, g.starts - starts, g.sd->session.state);
+		CHECK_EQ(g.reports, 0);
+		CHECK_EQ(g.starts, starts);
+		CHECK(!strcmp(g.kstate, "offline"));
+		CHECK_EQ(g.sd->session.state, SESSION_OPEN);	/* a new region, waiting for a start */
+		CHECK_EQ(stat_of(&g.sd->stats.recoveries), 0);
+		CHECK_EQ(req("param get pos_kp", msg, sizeof(msg), body, sizeof(body)), SE_OFFLINE);
+		operator_start(restores);
+		/* the new firmware runs on: nothing left of the stop */
+		RUN_UNTIL(0, 0.1);
+		CHECK_EQ(g.reports, 0);
+		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+	}
+	CHECK(!latched());
+	CHECK_EQ(stat_of(&g.sd->stats.latches), 0);
+	/* and a firmware that hangs on its own is still recovered */
+	restores = stat_of(&g.sd->stats.restores);
+	fw_hang();
+	RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1, 10);
+	CHECK_EQ(g.reports, 1);
+	CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
+	CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+	rig_down();
+}
+
+/* The operator stops a firmware servod restarted, once it attached, before
+ * its parameter set is loaded: the recovery ends there. */
+static void test_operator_stop_during_recovery(void)
+{
+	unsigned starts;
+
+	printf("servod recovery: the operator stops the restarted firmware before its parameter set\n");
+	rig_up(3, 50, 0);
+	fw_hang();
+	RUN_UNTIL(g.reports == 1 && g.starts == 2, 10);
+	CHECK_EQ(g.starts, 2);
+	/* the restarted firmware attached; the supervisor has not run since */
+	fw_stop_on_request(1);
+	fw_stop();
+	g.power = 0;
+	snprintf(g.kstate, sizeof(g.kstate), "offline");
+	wfile(g.dir, "state", g.kstate);
+	starts = g.starts;
+	RUN_UNTIL(g.sd->session.state == SESSION_OPEN, 5);
+	RUN_UNTIL(0, 0.3);
+	printf("  %u starts after the stop, session %d\n", g.starts - starts, g.sd->session.state);
+	CHECK_EQ(g.starts, starts);
+	CHECK(!strcmp(g.kstate, "offline"));
+	CHECK_EQ(g.sd->session.state, SESSION_OPEN);
+	CHECK_EQ(g.sd->recovery.phase, RESTART_NONE);
+	CHECK(!latched());
+	rig_down();
+}
+
 int main(void)
 {
 	setvbuf(stdout, 0, _IOLBF, 0);
@@ -870,5 +1007,7 @@ int main(void)
 	test_failed_restart_retried();
 	test_failing_restart_latches();
 	test_requests_do_not_starve();
+	test_operator_stop_is_final();
+	test_operator_stop_during_recovery();
 	return check_summary("servod recovery");
 }

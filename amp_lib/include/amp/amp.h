@@ -32,6 +32,7 @@ enum {
 	AMP_E_NOSPC = -8,	/* payload larger than the mailbox capacity */
 	AMP_E_STALLED = -9,	/* peer heartbeat still for wd_limit cycles */
 	AMP_E_FEEDBACK = -10,	/* no feedback taken for wd_limit cycles: reads refused */
+	AMP_E_PEER_STOPPING = -11,	/* peer stopping on request: its heartbeat ends */
 };
 
 /* Returns a static string naming an AMP_E_* code. */
@@ -115,7 +116,9 @@ void amp_linux_close(struct amp_linux *l);
 
 /*
  * AMP_OK if the servo is attached to this epoch and running (or in safe
- * stop), AMP_E_PEER_ABSENT if not attached (another epoch, and no attach
+ * stop), AMP_E_PEER_STOPPING if its state word says it is stopping on a
+ * request (remoteproc's stop: not a fault, its heartbeat ends),
+ * AMP_E_PEER_ABSENT if not attached (another epoch, and no attach
  * in this one yet: attach_count 0 and none seen), AMP_E_PEER_ERROR if
  * attached but its state word says FAULT, OFFLINE (an attach writes
  * RUNNING before the epoch, and nothing writes OFFLINE after it) or is no
@@ -150,11 +153,13 @@ int amp_linux_set_wd_limit(struct amp_linux *l, uint32_t wd_limit);
  * AMP_MAX_AXES), set the semaphore, publish, then read the feedback record
  * that sequence named (into l->fb, described by rx). Returns AMP_OK,
  * AMP_E_INVAL, AMP_E_PEER_ABSENT (servo not attached, commands still
- * published), AMP_E_PEER_ERROR (state FAULT or garbage), AMP_E_STALLED or
- * AMP_E_FEEDBACK. The heartbeat watchdog runs from the servo's first attach
- * in this epoch on, whatever the servo's state word says afterwards:
- * AMP_E_STALLED (heartbeat still for wd_limit cycles) takes precedence over
- * the rest. A new attach (the servo's attach_count changed) resynchronises
+ * published), AMP_E_PEER_ERROR (state FAULT or garbage), AMP_E_STALLED,
+ * AMP_E_FEEDBACK or AMP_E_PEER_STOPPING. The heartbeat watchdog runs from
+ * the servo's first attach in this epoch on, whatever the servo's state
+ * word says afterwards, except STOPPING: a servo that says it stops on
+ * request is never a stall (AMP_E_PEER_STOPPING, its watchdog re-armed).
+ * Otherwise AMP_E_STALLED (heartbeat still for wd_limit cycles) takes
+ * precedence over the rest. A new attach (the servo's attach_count changed) resynchronises
  * the feedback: its first whole record of this epoch is taken (FRESH)
  * whatever its sequence, unless it is word for word the record l->fb
  * already holds (STALE: nothing new). AMP_E_FEEDBACK, next in precedence:

@@ -45,6 +45,9 @@
 #define AMP_SSTATE_RUNNING  0x534e5552u	/* "RUNS" */
 #define AMP_SSTATE_SAFESTOP 0x53504f54u	/* "TOPS": axes stopped, see fault */
 #define AMP_SSTATE_FAULT    0x53544c46u	/* "FLTS": servo-side error */
+/* "STPS": stopping on request (remoteproc's stop, seen by the firmware):
+ * written before the heartbeat stops, the last word the servo writes */
+#define AMP_SSTATE_STOPPING 0x53505453u
 
 /* Control words. Bit 0 of amp_cmd_axis.control_word enables the axis. */
 #define AMP_AXIS_ENABLE (1u << 0)
