@@ -25,9 +25,9 @@ sleep 2
 tail -n 6 /tmp/servod.log
 ampctl status
 ampctl param get pos_kp
-# 5. stop the firmware; servod waits for it
+# 5. stop the firmware: a stop is final (the firmware says STOPPING, servod restarts nothing and waits for a start)
 echo stop > /sys/class/remoteproc/remoteproc0/state
+sleep 2
 cat /sys/class/remoteproc/remoteproc0/state
-sleep 0.5
 tail -n 3 /tmp/servod.log
 ampctl param get pos_kp; echo "ampctl exit status $? (3 = servo not running)"
