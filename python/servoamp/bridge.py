@@ -45,21 +45,23 @@ import struct
 import sys
 import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any, Callable, Mapping
 
 import foxglove
-from foxglove import Channel, Parameter, ParameterType, Schema
+from foxglove import Channel, Schema
 from foxglove.channels import LogChannel
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 from foxglove.messages import Log, LogLevel, Timestamp
-from foxglove.websocket import Capability, ServerListener, StatusLevel
+from foxglove.websocket import Capability
 
 from servoamp import canlink, pbenc
 from servoamp import telemetry as tw
 from servoamp import wsfront
+from servoamp.bridge_params import (READ_ONLY, FrontAuth, Listener, ParamError, ParamInfo,  # noqa: F401
+                                    fox_param, parse_param_list)
+from servoamp.guestclock import GuestClock
 from servoamp.record import RecordResult
 from servoamp.schemas import servoamp_pb2 as pb
 
@@ -112,113 +114,6 @@ def is_loopback(host: str) -> bool:
 
 class RecordingError(Exception):
     """The MCAP file could not be written (a full disk): recording stopped."""
-
-
-class ParamError(Exception):
-    """servod refused a parameter request (its message)."""
-
-    def __init__(self, status: int, msg: str) -> None:
-        super().__init__(msg)
-        self.status = status
-
-
-@dataclass
-class ParamInfo:
-    id: int
-    name: str
-    type: str   # u32, i32, f32
-    unit: str
-    min: float
-    max: float
-    value: float | int
-    read_only: bool
-
-
-def parse_param_list(text: str) -> dict[str, ParamInfo]:
-    """servod's ``param list`` table (params.c): id name type unit min max default value [(ro)]."""
-    out: dict[str, ParamInfo] = {}
-    for line in text.splitlines()[1:]:
-        f = line.split()
-        if len(f) < 8 or not f[0].isdigit():
-            continue
-        typ = f[2]
-        val: float | int = float(f[7]) if typ == "f32" else int(f[7])
-        out[f[1]] = ParamInfo(int(f[0]), f[1], typ, "" if f[3] == "-" else f[3], float(f[4]),
-                              float(f[5]), val, "(ro)" in f[8:])
-    return out
-
-
-def fox_param(name: str, typ: str, v: float | int) -> Parameter:
-    if typ == "f32":
-        return Parameter(name, value=float(v), type=ParameterType.Float64)
-    return Parameter(name, value=int(v))
-
-
-class GuestClock:
-    """The emulator's virtual time (ns since the machine's reset, the clock
-    of canlink frames) on the controller's CLOCK_MONOTONIC (the clock of
-    the cycle records), through the servo core's global timer (gt), which
-    both sides see:
-
-    * gt - monotonic, from the cycle records: a fresh record holds the
-      cycle interrupt in both clocks (servod's wake-up ``t_ns`` minus its
-      wake-up latency, and ``t_cycle``, the servo core's global timer at
-      ``clock_hz``, 32 bits, at the start of the same cycle). The median of
-      the first SAMPLES records. Each ``t_cycle`` is unwrapped to the value
-      nearest the event (Linux's clocksource is the same timer: the two
-      differ by milliseconds, not by half a wrap, 21 s at 100 MHz).
-    * virtual - gt, from the master's time stamp on the bus (CiA 301
-      0x1013: the global timer in us, 32 bits, on PDO 0x1FF, the first frame
-      of a master's cycle, rpu_app/src/canopen_master.h): sent on an idle
-      bus, the frame starts when the servo core writes it, so its start on
-      the bus (its end minus its bits at the bit rate) is the stamp in
-      virtual time. Linux zeroes the global timer when it takes it as its
-      clocksource, so this is not a constant of the emulator; modulo 2^32 us
-      (71 min). A stamp behind other frames on the bus is not used.
-
-    Known once both are: a boot's constant."""
-
-    SAMPLES = 33
-    WRAP_US = 1 << 32
-
-    def __init__(self) -> None:
-        self.samples: list[int] = []
-        self.gt_minus_mono_ns: int | None = None
-        self.virt_minus_gt_ns: int | None = None
-
-    @property
-    def offset_ns(self) -> int | None:
-        """virtual - monotonic, once known."""
-        if self.gt_minus_mono_ns is None or self.virt_minus_gt_ns is None:
-            return None
-        return self.virt_minus_gt_ns + self.gt_minus_mono_ns
-
-    def add_cycle(self, t_ns: int, wake_latency_ns: int, t_cycle: int, clock_hz: int) -> bool:
-        """One fresh cycle record; True when this made the offset known."""
-        if self.gt_minus_mono_ns is not None or clock_hz <= 0:
-            return False
-        event = t_ns - wake_latency_ns
-        wrap = 1 << 32
-        k = round((event * clock_hz / 1e9 - t_cycle) / wrap)
-        gt_ns = (t_cycle + k * wrap) * 1_000_000_000 // clock_hz
-        self.samples.append(gt_ns - event)
-        if len(self.samples) < self.SAMPLES:
-            return False
-        self.gt_minus_mono_ns = sorted(self.samples)[len(self.samples) // 2]
-        return self.offset_ns is not None
-
-    def add_stamp(self, t_start_ns: int, stamp_us: int) -> bool:
-        """A time stamp that started on an idle bus at virtual t_start_ns;
-        True when this made the offset known."""
-        if self.virt_minus_gt_ns is not None:
-            return False
-        self.virt_minus_gt_ns = (t_start_ns - stamp_us * 1000) % (self.WRAP_US * 1000)
-        return self.offset_ns is not None
-
-    def to_monotonic(self, virt_ns: int) -> int:
-        off = self.offset_ns
-        assert off is not None
-        return max(0, virt_ns - off)
 
 
 class Bridge:
@@ -285,6 +180,7 @@ class Bridge:
         self.server = None
         self.server_ro = None
         self.front: wsfront.WsFront | None = None
+        self.front_auth = FrontAuth()
         if serve:
             if not is_loopback(ws_host):
                 raise ValueError(f"{ws_host} is not a loopback address: the live view is "
@@ -296,7 +192,7 @@ class Bridge:
                 return foxglove.start_server(
                     name=name, host="127.0.0.1", port=0, context=self.ctx,
                     capabilities=[Capability.Parameters] if params else [],
-                    server_listener=_Listener(self, writable),
+                    server_listener=Listener(self, writable),
                     message_backlog_size=message_backlog, tls_cert=crt, tls_key=key)
 
             try:
@@ -305,7 +201,8 @@ class Bridge:
                 # a taken port raises here, before any file is opened
                 self.front = wsfront.WsFront(ws_host, ws_port, upstream_rw=self.server.port,
                                              upstream_ro=self.server_ro.port, tls=tls,
-                                             token=self.ws_token, origins=allow_origins)
+                                             token=self.ws_token, origins=allow_origins,
+                                             vouch=self.front_auth.issue)
             except BaseException:
                 self._stop_servers()
                 raise
@@ -822,72 +719,3 @@ class Bridge:
             for ev, slot in self.pending.values():
                 slot[:] = [-3, why]
                 ev.set()
-
-
-READ_ONLY = ("servoamp: this connection is read-only: parameters are set through the URL "
-             "with the token that servoamp bridge printed")
-
-
-class _Listener(ServerListener):
-    """A WebSocket server's callbacks (called on the SDK's threads): the
-    read-write server's sets reach servod, the read-only server's are
-    refused with an error status."""
-
-    def __init__(self, b: Bridge, writable: bool) -> None:
-        self.b = b
-        self.writable = writable
-
-    def _status(self, msg: str) -> None:
-        srv = self.b.server if self.writable else self.b.server_ro
-        if srv is not None:
-            srv.publish_status(msg, StatusLevel.Error)
-
-    def on_get_parameters(self, client: Any, param_names: list[str],
-                          request_id: str | None = None) -> list[Parameter]:
-        try:
-            ps = self.b.list_params()
-        except ParamError as e:
-            self._status(f"servoamp: parameters: {e}")
-            return []
-        return [fox_param(p.name, p.type, p.value) for p in ps.values()
-                if not param_names or p.name in param_names]
-
-    def on_set_parameters(self, client: Any, parameters: list[Parameter],
-                          request_id: str | None = None) -> list[Parameter]:
-        out: list[Parameter] = []
-        if not self.writable:
-            self._status(READ_ONLY)
-            return [fox_param(i.name, i.type, i.value) for p in parameters
-                    if (i := self.b.params.get(p.name)) is not None]
-        if not self.b.params:
-            try:
-                self.b.list_params()
-            except ParamError as e:
-                self._status(f"servoamp: parameters: {e}")
-                return []
-        for p in parameters:
-            info = self.b.params.get(p.name)
-            if info is None:
-                self._status(f"servoamp: no parameter {p.name!r}")
-                continue
-            v = p.get_value()
-            try:
-                if not isinstance(v, (int, float, str)) or isinstance(v, bool):
-                    raise ParamError(6, f"{p.name}: a number is needed, got {v!r}")
-                self.b.set_param(p.name, v)
-            except ParamError as e:
-                self._status(f"servoamp: param set {p.name} {v!s:.40}: refused: {e}")
-            out.append(fox_param(info.name, info.type, info.value))
-        return out
-
-    def on_subscribe(self, client: Any, channel: Any) -> None:
-        self.b._subscription(self.writable, int(client.id), str(channel.topic), True)
-
-    def on_unsubscribe(self, client: Any, channel: Any) -> None:
-        self.b._subscription(self.writable, int(client.id), str(channel.topic), False)
-
-    def on_parameters_subscribe(self, param_names: list[str]) -> None:
-        return None
-
-    def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
-        return None

@@ -40,6 +40,7 @@ docs/recording.md, "Live: who may connect".
 from __future__ import annotations
 
 import hmac
+import json
 import os
 import selectors
 import shutil
@@ -48,9 +49,12 @@ import ssl
 import subprocess
 import sys
 import tempfile
+import struct
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 SUBPROTOCOL = "foxglove.sdk.v1"
@@ -108,15 +112,28 @@ class HeadError(Exception):
     pass
 
 
-def read_head(sock: socket.socket, limit: int = HEAD_MAX) -> tuple[bytes, bytes]:
-    """An HTTP head (up to the blank line) and what came after it."""
+def read_head(sock: socket.socket, limit: int = HEAD_MAX,
+              timeout: float | None = None) -> tuple[bytes, bytes]:
+    """An HTTP head (up to the blank line) and what came after it. With a
+    timeout, the whole head must come within it (one deadline, however the
+    bytes trickle in); without, each read has the socket's own timeout."""
     buf = b""
+    deadline = None if timeout is None else time.monotonic() + timeout
     while b"\r\n\r\n" not in buf:
         if len(buf) > limit:
             raise HeadError(f"request head over {limit} bytes")
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise HeadError(f"no complete request head within {timeout:g} s")
+            sock.settimeout(left)
         try:
             data = sock.recv(4096)
-        except (socket.timeout, ssl.SSLError, OSError) as e:
+        except socket.timeout:
+            if deadline is not None:
+                raise HeadError(f"no complete request head within {timeout:g} s") from None
+            raise HeadError("no complete request head: timed out") from None
+        except (ssl.SSLError, OSError) as e:
             raise HeadError(f"no complete request head: {e}") from None
         if not data:
             raise HeadError("closed before the request head ended")
@@ -176,9 +193,26 @@ def new_tls() -> tuple[bytes, bytes, ssl.SSLContext]:
         return make_tls(Path(d))
 
 
+def text_frame(payload: bytes) -> bytes:
+    """A client's (masked) text frame."""
+    mask = os.urandom(4)
+    n = len(payload)
+    if n < 126:
+        hdr = bytes([0x81, 0x80 | n])
+    elif n < 65536:
+        hdr = bytes([0x81, 0x80 | 126]) + struct.pack(">H", n)
+    else:
+        hdr = bytes([0x81, 0x80 | 127]) + struct.pack(">Q", n)
+    return hdr + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+
+
 def strip_token(target: str) -> tuple[str, str | None]:
-    """The request target without its token parameter, and the token."""
-    u = urlsplit(target)
+    """The request target without its token parameter, and the token
+    (HeadError for a target no URL parser takes, such as ``//[``)."""
+    try:
+        u = urlsplit(target)
+    except ValueError as e:
+        raise HeadError(f"bad request target {target[:80]!r}: {e}") from None
     q = parse_qsl(u.query, keep_blank_values=True)
     tok = next((v for k, v in q if k == "token"), None)
     rest = [(k, v) for k, v in q if k != "token"]
@@ -191,8 +225,9 @@ class WsFront:
 
     def __init__(self, host: str, port: int, *, upstream_rw: int, upstream_ro: int,
                  tls: ssl.SSLContext, token: str, origins: tuple[str, ...] | list[str],
-                 log: bool = True) -> None:
+                 vouch: Callable[[], str] | None = None, log: bool = True) -> None:
         self.up_rw, self.up_ro = upstream_rw, upstream_ro
+        self.vouch = vouch
         self.tls = tls
         self.token = token
         self.origins = tuple(origins)
@@ -273,14 +308,15 @@ class WsFront:
     def _serve(self, c: socket.socket) -> None:
         up: ssl.SSLSocket | None = None
         try:
-            c.settimeout(HEAD_TIMEOUT_S)
             try:
-                raw, rest = read_head(c)
+                raw, rest = read_head(c, timeout=HEAD_TIMEOUT_S)
                 head = parse_head(raw)
+                kind, why = self.decide(head)
             except HeadError as e:
+                c.settimeout(HEAD_TIMEOUT_S)
                 _answer(c, 400, "Bad Request", f"servoamp bridge: {e}")
                 return
-            kind, why = self.decide(head)
+            c.settimeout(HEAD_TIMEOUT_S)
             if kind == "bad":
                 _answer(c, 400, "Bad Request", f"servoamp bridge: {why}")
                 return
@@ -314,8 +350,14 @@ class WsFront:
                 rhead = [f"Sec-WebSocket-Protocol: {SUBPROTOCOL_OLD}"
                          if ln.lower().startswith("sec-websocket-protocol:") else ln
                          for ln in rhead]
+            upgraded = rhead[0].split(" ")[1:2] == ["101"]
+            if upgraded and kind == "rw" and self.vouch is not None:
+                # before any byte of the client's: the server marks this
+                # connection as the token's (servoamp.bridge_params)
+                up.sendall(text_frame(json.dumps({"op": "getParameters", "parameterNames": [],
+                                                  "id": self.vouch()}).encode()))
             c.sendall(("\r\n".join(rhead) + "\r\n\r\n").encode("latin-1") + rrest)
-            if not rhead[0].split(" ")[1:2] == ["101"]:
+            if not upgraded:
                 return
             with self.lock:
                 if kind == "rw":

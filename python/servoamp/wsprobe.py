@@ -12,18 +12,21 @@ from __future__ import annotations
 import base64
 import os
 import socket
-import struct
+import ssl
 import sys
 
-from servoamp.wsfront import HeadError, read_head
+from servoamp.wsfront import HeadError, read_head, text_frame  # noqa: F401 (text_frame: for the tests)
 
 
 def upgrade(port: int, target: str = "/", origin: str | None = None,
             protocol: str = "foxglove.sdk.v1", host: str = "127.0.0.1",
-            timeout: float = 10.0) -> tuple[int, str, socket.socket]:
+            timeout: float = 10.0, tls: ssl.SSLContext | None = None) -> tuple[int, str, socket.socket]:
     """Sends a browser's upgrade request: (HTTP status, the answer's head
-    and body as read, the socket, left open)."""
+    and body as read, the socket, left open). With tls, over TLS in that
+    context (a local process need not verify anything)."""
     s = socket.create_connection((host, port), timeout=timeout)
+    if tls is not None:
+        s = tls.wrap_socket(s, server_hostname=host)
     key = base64.b64encode(os.urandom(16)).decode()
     lines = [f"GET {target} HTTP/1.1", f"Host: {host}:{port}", "Upgrade: websocket",
              "Connection: Upgrade", f"Sec-WebSocket-Key: {key}", "Sec-WebSocket-Version: 13",
@@ -38,19 +41,6 @@ def upgrade(port: int, target: str = "/", origin: str | None = None,
     head = raw.decode("latin-1")
     status = int(head.split(" ")[1]) if head.startswith("HTTP/") and " " in head else 0
     return status, head + "\r\n\r\n" + rest.decode("latin-1", "replace"), s
-
-
-def text_frame(payload: bytes) -> bytes:
-    """A client's (masked) text frame."""
-    mask = os.urandom(4)
-    n = len(payload)
-    if n < 126:
-        hdr = bytes([0x81, 0x80 | n])
-    elif n < 65536:
-        hdr = bytes([0x81, 0x80 | 126]) + struct.pack(">H", n)
-    else:
-        hdr = bytes([0x81, 0x80 | 127]) + struct.pack(">Q", n)
-    return hdr + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import os
 import socket
+import ssl
 import subprocess
 import threading
 import time
@@ -29,7 +30,7 @@ from typing import Any, Iterator
 import pytest
 
 from recorder_helpers import TOP, Feed
-from servoamp import bridge, wsprobe
+from servoamp import bridge, wsfront, wsprobe
 
 TOKEN = "access-test-token-0123"
 WS_CHECK = TOP / "tools" / "mcap-verify" / "ws-check.mjs"
@@ -154,6 +155,113 @@ def test_bad_requests_answered_400(live: bridge.Bridge) -> None:
     with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
         s.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
         assert s.recv(4096).startswith(b"HTTP/1.1 400"), "no upgrade"
+    status, head, sk = wsprobe.upgrade(port, f"/?token={live.ws_token}", None)
+    sk.close()
+    assert status == 101, head
+
+
+def _unverified_tls() -> ssl.SSLContext:
+    """What any local process may use: TLS without verifying anything."""
+    ctx = ssl.create_default_context()
+    ctx.check_hostname = False
+    ctx.verify_mode = ssl.CERT_NONE
+    return ctx
+
+
+def test_local_process_cannot_set_through_the_sdk_servers(live: bridge.Bridge) -> None:
+    """Issue 36, item 11: a process of any uid finds the SDK servers' ports
+    (/proc/net/tcp), speaks TLS to them without verifying, and sends
+    setParameters. Before, the read-write server set pos_kp to 99; now only
+    connections the front relayed with the token may set."""
+    before = _pos_kp(live)
+    for srv in live.servers:
+        status, head, s = wsprobe.upgrade(srv.port, "/", None, tls=_unverified_tls())
+        got = b""
+        try:
+            assert status == 101, head   # the SDK server itself: it authenticates nobody
+            s.sendall(wsprobe.text_frame(json.dumps({"op": "setParameters", "id": "local", "parameters": [
+                {"name": "pos_kp", "value": 99.0, "type": "float64"}]}).encode()))
+            s.settimeout(0.5)
+            deadline = time.monotonic() + 30   # a hang turned into a failure
+            while b"parameterValues" not in got and time.monotonic() < deadline:
+                try:
+                    data = s.recv(65536)
+                except (TimeoutError, ssl.SSLWantReadError):
+                    continue
+                if not data:
+                    break
+                got += data
+        finally:
+            s.close()
+        assert b"parameterValues" in got, got[-400:]
+        assert _pos_kp(live) == before, f"set through port {srv.port}"
+        assert b"read-only" in got or b"did not come through" in got, got[-400:]
+    # and the front's own path with the token still sets (the reference client)
+    assert live.ws_url is not None
+    out = _ws_check(live.ws_url, "--seconds", "0.5", "--param", "pos_kp", "--good", "72", "--bad", "-5")
+    assert out["set_good"]["reply"] == 72, out
+
+
+def test_request_head_has_one_deadline(live: bridge.Bridge) -> None:
+    """Issue 36, item 12: 64 connections trickling a byte a second held
+    every slot (the 5 s timeout was per recv()), and the operator's URL got
+    503 for as long as they trickled. One deadline per head: they are
+    answered 400 after 5 s and the token's URL gets through."""
+    port = live.ws_port
+    assert port is not None
+    stop = threading.Event()
+    answers: list[bytes] = []
+    socks = [socket.create_connection(("127.0.0.1", port), timeout=10) for _ in range(wsfront.MAX_CONNS)]
+
+    def trickle() -> None:
+        while not stop.is_set():
+            for s in socks:
+                try:
+                    s.sendall(b"G")
+                except OSError:
+                    pass
+            stop.wait(1.0)
+
+    th = threading.Thread(target=trickle, daemon=True)
+    th.start()
+    try:
+        status, head = 0, ""
+        deadline = time.monotonic() + 40   # tricklers keep trickling all along
+        while status != 101 and time.monotonic() < deadline:
+            status, head, s = wsprobe.upgrade(port, f"/?token={live.ws_token}", None)
+            s.close()
+            if status != 101:
+                time.sleep(0.5)
+        assert status == 101, head
+        for s in socks:
+            s.settimeout(10)
+            try:
+                answers.append(s.recv(4096))
+            except OSError:
+                answers.append(b"")
+    finally:
+        stop.set()
+        th.join(timeout=5)
+        for s in socks:
+            s.close()
+    assert all(a.startswith(b"HTTP/1.1 400") and b"within 5 s" in a for a in answers), answers[:3]
+
+
+def test_malformed_target_answered_400(live: bridge.Bridge) -> None:
+    """Issue 36, item 13: a target such as //[ raised ValueError in urlsplit
+    before the Origin check: no answer, a traceback. Now 400."""
+    port = live.ws_port
+    assert port is not None
+    for target in ("//[", "http://[::1/", "//[x]:1/"):
+        with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+            s.sendall(f"GET {target} HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\n"
+                      "Connection: Upgrade\r\n\r\n".encode())
+            s.settimeout(10)
+            try:
+                got = s.recv(4096)
+            except OSError:
+                got = b""
+            assert got.startswith(b"HTTP/1.1 400") and b"bad request target" in got, (target, got)
     status, head, sk = wsprobe.upgrade(port, f"/?token={live.ws_token}", None)
     sk.close()
     assert status == 101, head
