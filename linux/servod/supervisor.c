@@ -21,6 +21,38 @@
 /* How long a restart waits for remoteproc's crash handler after a report. */
 #define CRASH_WAIT_MS 1000u
 
+/*
+ * CLOSED, remoteproc says running: started again before servod initialised
+ * a new region (a stop and a start in quick succession, between two passes
+ * of the supervisor). A firmware that attached to the region servod made
+ * (its epoch, a sane state) is servod's: the session opens on that region
+ * as it is, and the new attach gets its parameter set. Anything else is
+ * not servod's to touch until it is offline. 1 if reopened.
+ */
+static int reopen_session(struct servod *sd, const char *rs)
+{
+	struct session *ss = &sd->session;
+	struct amp_peer_info pi = { 0 };
+
+	if (!ss->epoch || strcmp(rs, "running"))
+		return 0;
+	pthread_mutex_lock(&sd->lock);
+	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
+	if (pi.epoch != ss->epoch || pi.attach_count == 0 ||
+	    (pi.state != AMP_SSTATE_RUNNING && pi.state != AMP_SSTATE_SAFESTOP)) {
+		pthread_mutex_unlock(&sd->lock);
+		return 0;
+	}
+	session_event(ss, SEV_REGION_READY);
+	atomic_store(&ss->stall_pending, 0);
+	cycle_stats_new_session(&sd->stats);
+	pthread_mutex_unlock(&sd->lock);
+	logm(sd, "servo started again before servod saw it offline: attached to this servod's region "
+		 "(epoch %u, attach_count %u): session reopened", pi.epoch, pi.attach_count);
+	ss->waiting_logged = 0;
+	return 1;
+}
+
 /* CLOSED: a new region (epoch) once remoteproc says the servo is offline. */
 static void open_session(struct servod *sd, const char *rs)
 {
@@ -28,6 +60,8 @@ static void open_session(struct servod *sd, const char *rs)
 	int rc;
 
 	if (strcmp(rs, "offline")) {
+		if (reopen_session(sd, rs))
+			return;
 		if (!ss->waiting_logged) {
 			logm(sd, "servo %s but not attached to this servod: waiting until it is offline", rs);
 			ss->waiting_logged = 1;

@@ -969,6 +969,34 @@ static void test_operator_stop_is_final(void)
 	rig_down();
 }
 
+/* `echo stop; echo start` in quick succession: servod saw "offline" (its
+ * session closed) and the firmware is running again before servod made a
+ * new region; it attached to the region servod still has. servod takes it
+ * back (before: "waiting until it is offline", for good, while the firmware
+ * ran without its parameter set; the stop's stall had hidden that). */
+static void test_stop_and_start_between_passes(void)
+{
+	uint64_t restores;
+
+	printf("servod recovery: stop and start between two passes of the supervisor, ten times\n");
+	rig_up(3, 50, 0);
+	for (int round = 0; round < 10; round++) {
+		restores = stat_of(&g.sd->stats.restores);
+		fw_stop_on_request(1);
+		fw_stop();
+		g.power = 0;
+		snprintf(g.kstate, sizeof(g.kstate), "offline");
+		wfile(g.dir, "state", g.kstate);
+		RUN_UNTIL(g.sd->session.state == SESSION_CLOSED, 5);
+		CHECK_EQ(g.sd->session.state, SESSION_CLOSED);
+		operator_start(restores);
+		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+	}
+	CHECK_EQ(g.reports, 0);
+	CHECK(!latched());
+	rig_down();
+}
+
 /* The operator stops a firmware servod restarted, once it attached, before
  * its parameter set is loaded: the recovery ends there. */
 static void test_operator_stop_during_recovery(void)
@@ -1009,5 +1037,6 @@ int main(void)
 	test_requests_do_not_starve();
 	test_operator_stop_is_final();
 	test_operator_stop_during_recovery();
+	test_stop_and_start_between_passes();
 	return check_summary("servod recovery");
 }
