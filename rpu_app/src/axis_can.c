@@ -12,7 +12,9 @@
  *                         axes of that bus fault with 0x8140), then every
  *                         frame the interrupt put in the ring goes to the
  *                         bus's master (TPDOs answering the last SYNC,
- *                         heartbeats, EMCY, SDO answers)
+ *                         heartbeats, EMCY, SDO answers), then its
+ *                         supervision (TPDO silence, heartbeat consumer,
+ *                         NMT start confirmation: co_master_supervise)
  *   can_cycle (per axis)  the axis's target and enable request for the
  *                         master; its feedback from the last TPDO1
  *   axis_can_cycle_end    each master's cycle: its time stamp when due
@@ -209,6 +211,7 @@ void axis_can_cycle_begin(void)
 		}
 		for (uint32_t n = 0; n < CANPS_RX_RING && canps_recv(&cb->dev, &f); n++)
 			co_master_rx(&cb->m, &f);
+		co_master_supervise(&cb->m);	/* its faults in this cycle's feedback */
 	}
 }
 

@@ -377,9 +377,8 @@ static void send_rpdo(struct co_master *m, struct co_node *n)
 }
 
 /* One operational node at the start of a cycle: the NMT start's
- * confirmation, TPDO silence, the heartbeat consumer; a node that left
- * Operational gets NMT start again on the acknowledgement. Returns 1
- * when the node's TPDO1 of the last SYNC is missing. */
+ * confirmation, TPDO silence, the heartbeat consumer. Returns 1 when the
+ * node's TPDO1 of the last SYNC is missing. */
 static int supervise(struct co_master *m, struct co_node *n)
 {
 	int missing = !n->tpdo_seen;
@@ -391,20 +390,11 @@ static int supervise(struct co_master *m, struct co_node *n)
 				co_raise_fault(m, n, CO_ERR_NMT_START);
 				return 0;
 			}
-			n->start_tries++;	/* NMT start lost: sent again */
+			n->start_tries++;	/* NMT start lost: sent again this cycle */
 			m->st.start_retries++;
 			n->phase = CO_PH_START;
-			return 0;
 		}
 		return 0;	/* no TPDO expected before the start is confirmed */
-	}
-	if (n->nmt_lost && n->enable_req && !n->enable_prev) {
-		co_acknowledge(m, n);	/* NMT start again, then the enable sequence */
-		n->ack_wait = 1;
-		n->nmt_lost = 0;
-		n->start_tries = 0;
-		n->phase = CO_PH_START;
-		return 0;
 	}
 	if (missing) {
 		if (n->pdo_silent < 0xFFu)
@@ -424,19 +414,45 @@ static int supervise(struct co_master *m, struct co_node *n)
 	return missing;
 }
 
+void co_master_supervise(struct co_master *m)
+{
+	uint32_t missing = 0;
+
+	if (m->supervised)
+		return;
+	m->supervised = 1;
+	m->cycle++;
+	m->st.cycles++;
+	for (uint32_t i = 0; i < m->n_nodes; i++)
+		if (m->node[i].phase == CO_PH_OPERATIONAL)
+			missing += (uint32_t)supervise(m, &m->node[i]);
+	m->st.pdo_missing += missing;
+	m->st.pdo_missing_last = missing;
+	if (missing > m->st.pdo_missing_max)
+		m->st.pdo_missing_max = missing;
+}
+
 void co_master_cycle(struct co_master *m)
 {
 	struct can_frame f;
-	uint32_t missing = 0, operational = 0;
+	uint32_t operational = 0;
 
-	m->cycle++;
-	m->st.cycles++;
+	co_master_supervise(m);	/* if the caller did not, after the frames */
+	m->supervised = 0;
 	for (uint32_t i = 0; i < m->n_nodes; i++) {
 		struct co_node *n = &m->node[i];
+		int rising = n->enable_req && !n->enable_prev;
 
-		if (n->phase == CO_PH_OPERATIONAL) {
-			missing += (uint32_t)supervise(m, n);
-		} else if (n->phase == CO_PH_FAILED && n->enable_req && !n->enable_prev) {
+		if (n->phase == CO_PH_OPERATIONAL && n->nmt_lost && rising) {
+			/* out of Operational: the acknowledgement sends NMT start
+			 * again, then the enable sequence (and a fault reset if
+			 * the drive turns out to be in Fault) */
+			co_acknowledge(m, n);
+			n->ack_wait = 1;
+			n->nmt_lost = 0;
+			n->start_tries = 0;
+			n->phase = CO_PH_START;
+		} else if (n->phase == CO_PH_FAILED && rising) {
 			n->phase = CO_PH_RESET;	/* a new enable request retries the start-up */
 			n->tries = 0;
 			n->fault = 0;	/* and acknowledges the fault */
@@ -447,10 +463,6 @@ void co_master_cycle(struct co_master *m)
 			n->enable_prev = n->enable_req;
 		co_startup_step(m, n);
 	}
-	m->st.pdo_missing += missing;
-	m->st.pdo_missing_last = missing;
-	if (missing > m->st.pdo_missing_max)
-		m->st.pdo_missing_max = missing;
 
 	for (uint32_t i = 0; i < m->n_nodes; i++) {
 		struct co_node *n = &m->node[i];

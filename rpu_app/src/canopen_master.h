@@ -226,6 +226,7 @@ struct co_master {
 	uint32_t hb_consumer_cycles, sdo_timeout_cycles, boot_timeout_cycles, stamp_cycles;
 	uint32_t start_timeout_cycles, start_retries, pdo_timeout_cycles, fault_reset_cycles;
 	uint32_t n_nodes;
+	uint32_t supervised;	/* co_master_supervise done for this cycle */
 	struct co_node node[CO_MAX_NODES];
 	uint8_t index_of[128];	/* node id -> node[] index, 0xFF: not ours */
 	struct co_stats st;
@@ -251,7 +252,13 @@ int co_master_init(struct co_master *m, co_send_fn send, void *ctx, const struct
 void co_master_start(struct co_master *m);
 /* One received frame (any COB-ID; what is not ours is counted and dropped). */
 void co_master_rx(struct co_master *m, const struct can_frame *f);
-/* One cycle: timeouts, start-up steps, RPDOs then SYNC. */
+/* The supervision of this cycle, once the frames received are in
+ * (co_master_rx): the cycle counter, TPDO silence, the heartbeat consumer,
+ * the NMT start's confirmation. Call it before reading the nodes for the
+ * axes' feedback, so that a fault shows in this cycle; co_master_cycle
+ * does it if the caller did not. */
+void co_master_supervise(struct co_master *m);
+/* One cycle: the supervision (if not done), start-up steps, RPDOs then SYNC. */
 void co_master_cycle(struct co_master *m);
 /* 1 when the next co_master_cycle is a time-stamp cycle (then call
  * co_master_time_stamp first, with the time read just before). */
