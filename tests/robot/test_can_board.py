@@ -41,6 +41,7 @@ master; Linux sees the drives only through the feedback records:
 from __future__ import annotations
 
 import bisect
+import contextlib
 import functools
 import json
 import os
@@ -50,7 +51,7 @@ import subprocess
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import can
 import pytest
@@ -225,6 +226,35 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
     out["servod_log"] = cb.sh(f"cat {netboard.SERVOD_LOG}")
 
 
+@contextlib.contextmanager
+def _other_master(sock: Path) -> Iterator[can.BusABC]:
+    """A second NMT master on the bus: a passive python-can client of the
+    `servoamp` interface (QEMU never waits for it), read in a thread so
+    that its socket never fills while the test waits."""
+    bus = can.Bus(interface="servoamp", channel=str(sock))
+    stop = threading.Event()
+
+    def drain() -> None:
+        while not stop.is_set():
+            try:
+                bus.recv(0.2)
+            except can.CanOperationError:
+                return
+
+    th = threading.Thread(target=drain, daemon=True)
+    th.start()
+    try:
+        yield bus
+    finally:
+        stop.set()
+        th.join(timeout=5)
+        bus.shutdown()
+
+
+def _nmt(cs: int, node: int) -> can.Message:
+    return can.Message(arbitration_id=0x000, data=[cs, node], is_extended_id=False)
+
+
 def _second_master(cb: netboard.ControllerBoard, out: dict[str, Any]) -> None:
     """A passive python-can client of can0 sends NMT 'enter pre-operational'
     to node 1 (axis 0) while the program runs, then 'stop' to node 2
@@ -232,22 +262,23 @@ def _second_master(cb: netboard.ControllerBoard, out: dict[str, Any]) -> None:
     cb.sh_rc(f"ampctl run {PROGRAM} 2>&1", timeout=60)
     out["nmt_prog_run"] = cb.wait_status(lambda st: st.get("program.state") == "running", 120,
                                          "the program to run", raise_on_timeout=False)
-    with can.Bus(interface="servoamp", channel=str(cb.can_socks[0])) as other:   # passive
-        other.send(can.Message(arbitration_id=0x000, data=[0x80, 1], is_extended_id=False))
+    with _other_master(cb.can_socks[0]) as other:
+        other.send(_nmt(0x80, 1))
         out["nmt_preop"] = cb.wait_status(
             lambda st: st.get("axis0.error") == "0xff04" and st.get("program.state") != "running", 120,
             "axis0: error 0xff04 (pre-operational), the program ended", raise_on_timeout=False)
-        other.send(can.Message(arbitration_id=0x000, data=[0x02, 2], is_extended_id=False))
+        other.send(_nmt(0x02, 2))
         out["nmt_stopped"] = cb.wait_status(lambda st: st.get("axis1.error") == "0xff05", 120,
                                             "axis1: error 0xff05 (stopped)", raise_on_timeout=False)
         if out["nmt_stopped"].get("axis1.error") != "0xff05":
             # not detected (the master before issue 33): the other master
             # starts its drives again, so the steps after this one can run
-            other.send(can.Message(arbitration_id=0x000, data=[0x01, 0], is_extended_id=False))
+            other.send(_nmt(0x01, 0))
+            cb.sh("sleep 0.2", timeout=120)
     cb.sh("sleep 0.2", timeout=120)
     cb.ampctl("resume", expected_rc=None)                 # once
     out["nmt_enabled"] = cb.wait_status(
-        lambda st: _enabled(st) and all(st[f"axis{a}.error"] == "0x0000" for a in range(AXES)), 240,
+        lambda st: _enabled(st) and all(st.get(f"axis{a}.error") == "0x0000" for a in range(AXES)), 240,
         "every axis enabled again after one resume", raise_on_timeout=False)
 
 
