@@ -276,7 +276,7 @@ static void can_resume(uint32_t i)
 	cax[i].ss_active = 0;
 	/* resume acknowledges the drive's fault (a bus off, an EMCY...) */
 	if (cax[i].used && cax[i].bus < NBUS)
-		co_master_renew_enable(&bus[cax[i].bus].m, cax[i].idx);
+		co_master_acknowledge(&bus[cax[i].bus].m, cax[i].idx);
 }
 
 static void log_changes(uint32_t i, const struct co_node *n)

@@ -60,7 +60,7 @@ static void start_fault_reset(struct co_master *m, struct co_node *n)
 	m->st.fault_resets++;
 }
 
-/* The operator's acknowledgement (a rising edge of enable): the latched
+/* The operator's acknowledgement (co_master_acknowledge): the latched
  * fault and the drive's last EMCY code are cleared, and a drive in Fault
  * (or, if its state is not known yet, found in Fault later) is reset. */
 void co_acknowledge(struct co_master *m, struct co_node *n)
@@ -70,10 +70,10 @@ void co_acknowledge(struct co_master *m, struct co_node *n)
 	n->emcy_last = 0;
 	n->pdo_silent = 0;
 	n->ack_wait = 0;
-	if (in_fault(n))
+	if (n->phase != CO_PH_OPERATIONAL || n->state402 == CO402_UNKNOWN)
+		n->ack_wait = 1;	/* its state is not known (yet): decided by its first TPDO1 */
+	else if (in_fault(n))
 		start_fault_reset(m, n);
-	else if (n->state402 == CO402_UNKNOWN)
-		n->ack_wait = 1;
 }
 
 /* The controlword of a running fault reset in *cw, 1; or 0 once the reset
@@ -100,12 +100,8 @@ static int fault_reset_word(struct co_master *m, struct co_node *n, uint16_t *cw
 
 uint16_t co_controlword(struct co_master *m, struct co_node *n)
 {
-	int rising = n->enable_req && !n->enable_prev;
 	uint16_t cw;
 
-	n->enable_prev = n->enable_req;
-	if (rising)
-		co_acknowledge(m, n);
 	if (n->ack_wait && n->state402 != CO402_UNKNOWN) {
 		n->ack_wait = 0;
 		if (in_fault(n) && !n->fault)

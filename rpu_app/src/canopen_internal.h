@@ -81,8 +81,9 @@ static inline void co_raise_fault(struct co_master *m, struct co_node *n, uint16
 	m->st.faults++;
 }
 
-/* canopen_drive.c: the acknowledgement of an axis's faults (a rising edge
- * of its enable request), and the controlword of this cycle's RPDO. */
+/* canopen_drive.c: the acknowledgement of an axis's faults (the
+ * operator's: co_master_acknowledge), and the controlword of this cycle's
+ * RPDO. */
 void co_acknowledge(struct co_master *m, struct co_node *n);
 uint16_t co_controlword(struct co_master *m, struct co_node *n);
 

@@ -140,10 +140,10 @@ void co_master_stats(const struct co_master *m, struct co_stats *out)
 	*out = m->st;
 }
 
-void co_master_renew_enable(struct co_master *m, uint32_t idx)
+void co_master_acknowledge(struct co_master *m, uint32_t idx)
 {
 	if (idx < m->n_nodes)
-		m->node[idx].enable_prev = 0;
+		m->node[idx].ack_req = 1;
 }
 
 void co_master_bus_off(struct co_master *m)
@@ -441,26 +441,24 @@ void co_master_cycle(struct co_master *m)
 	m->supervised = 0;
 	for (uint32_t i = 0; i < m->n_nodes; i++) {
 		struct co_node *n = &m->node[i];
-		int rising = n->enable_req && !n->enable_prev;
 
-		if (n->phase == CO_PH_OPERATIONAL && n->nmt_lost && rising) {
-			/* out of Operational: the acknowledgement sends NMT start
-			 * again, then the enable sequence (and a fault reset if
-			 * the drive turns out to be in Fault) */
+		if (n->ack_req) {
+			n->ack_req = 0;
 			co_acknowledge(m, n);
-			n->ack_wait = 1;
-			n->nmt_lost = 0;
-			n->start_tries = 0;
-			n->phase = CO_PH_START;
-		} else if (n->phase == CO_PH_FAILED && rising) {
-			n->phase = CO_PH_RESET;	/* a new enable request retries the start-up */
-			n->tries = 0;
-			n->fault = 0;	/* and acknowledges the fault */
-			n->error_code = 0;
-			n->cfg_reason = CO_CFG_OK;
+			if (n->phase == CO_PH_OPERATIONAL && n->nmt_lost) {
+				/* out of Operational: NMT start again, then the
+				 * enable sequence (and a fault reset if the drive
+				 * turns out to be in Fault) */
+				n->ack_wait = 1;
+				n->nmt_lost = 0;
+				n->start_tries = 0;
+				n->phase = CO_PH_START;
+			} else if (n->phase == CO_PH_FAILED) {
+				n->phase = CO_PH_RESET;	/* the start-up from its beginning */
+				n->tries = 0;
+				n->cfg_reason = CO_CFG_OK;
+			}
 		}
-		if (n->phase != CO_PH_OPERATIONAL)
-			n->enable_prev = n->enable_req;
 		co_startup_step(m, n);
 	}
 

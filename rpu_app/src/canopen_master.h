@@ -35,7 +35,7 @@
  *      saying Operational within start_timeout_ms; otherwise it is sent
  *      again, start_retries times, then CO_ERR_NMT_START.
  * The CiA 402 enable sequence (shutdown -> switch on -> enable operation,
- * fault reset on a new enable request) runs on the statusword each cycle.
+ * fault reset on the acknowledgement) runs on the statusword each cycle.
  *
  * Supervision of an operational node (every way a drive stops following
  * is an axis fault):
@@ -50,10 +50,13 @@
  *     timeout or NMT state names the cause: the code is refined);
  *   - EMCY (0x80+node) with a non-zero code: the drive's error code;
  *   - a statusword in Fault without an EMCY: CO_ERR_DRIVE_FAULT.
- * Faults are latched until the next rising edge of the axis' enable
- * request (or co_master_renew_enable), which acknowledges them: the
- * latched code and the drive's last EMCY code are cleared, and a drive in
- * Fault gets a fault reset: bit 7 of the controlword, after a word with
+ * Faults are latched until the operator acknowledges them
+ * (co_master_acknowledge: the servo's resume), not by the axis' enable
+ * request going off and on again (Linux drops it for a cycle when a
+ * program ends in fault: that is no acknowledgement). The acknowledgement
+ * clears the latched code and the drive's last EMCY code, sends NMT start
+ * to a node that left Operational, retries a failed start-up, and gives a
+ * drive in Fault a fault reset: bit 7 of the controlword, after a word with
  * it clear, held until the drive's statusword leaves Fault or
  * fault_reset_ms has passed (then CO_ERR_FAULT_RESET, "fault reset
  * refused by drive"). A reset word the TX path refused is sent again.
@@ -155,7 +158,7 @@ struct co_node {
 	uint8_t sdo_busy;	/* a request is outstanding */
 	uint8_t tries;		/* NMT resets / SDO tries of the current step */
 	uint8_t enable_req;	/* the axis' enable request (co_master_set) */
-	uint8_t enable_prev;	/* last cycle's, for the rising edge */
+	uint8_t ack_req;	/* the operator's acknowledgement, for the next cycle */
 	uint8_t reset_active;	/* a fault reset runs (bit 7 held) */
 	uint8_t reset_sent;	/* ... and bit 7 went out after a word with it clear */
 	uint8_t ack_wait;	/* acknowledged before the 402 state was known */
@@ -266,11 +269,11 @@ int co_master_stamp_due(const struct co_master *m);
 void co_master_time_stamp(struct co_master *m, uint32_t now_us);
 /* The axis' command for the next cycle's RPDO. */
 void co_master_set(struct co_master *m, uint32_t idx, int enable, int32_t target);
-/* The operator's acknowledgement (the servo's resume): the next enable
- * request counts as a new one, even if the axis never stopped asking,
- * so it acknowledges a latched fault (and resets a drive in Fault, or
- * retries a failed start-up) as a rising edge of enable does. */
-void co_master_renew_enable(struct co_master *m, uint32_t idx);
+/* The operator's acknowledgement (the servo's resume), taken in the next
+ * cycle: the latched fault and the drive's last EMCY code are cleared, a
+ * drive in Fault is reset, a node out of Operational is started again, a
+ * failed start-up is retried. Nothing else clears a latched fault. */
+void co_master_acknowledge(struct co_master *m, uint32_t idx);
 /* The bus went off (and was restarted by the driver): every operational
  * node's axis faults with CO_ERR_BUS_OFF; counted. */
 void co_master_bus_off(struct co_master *m);

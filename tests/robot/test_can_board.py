@@ -178,7 +178,7 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
 
     # bus off: the drive simulator shorts can1 for SHORT_MS; every frame is
     # destroyed, the controller goes bus off, the firmware restarts it and
-    # faults the bus's axes with 0x8140; a new enable request (resume)
+    # faults the bus's axes with 0x8140; the operator's resume
     # acknowledges it and the axes are enabled again
     short_axes = [a for a in range(AXES) if a // 2 == SHORT_BUS]
     out["short_ans"] = cb.drives(SHORT_BUS, f"bus-short {SHORT_MS}")
@@ -636,6 +636,6 @@ def test_a_slow_fault_reset_takes_one_resume(run: dict[str, Any]) -> None:
     print(f"\naxis{ax}: fault reset refused {refused_ms:.1f} ms after the acknowledgement; with a drive "
           f"needing {RESET_CYCLES} SYNCs, out of Fault {left_cycles:.1f} cycles after one resume")
     assert RESET_TIMEOUT_MS - 2 <= refused_ms <= RESET_TIMEOUT_MS + 2, refused_ms
-    assert RESET_CYCLES <= left_cycles <= RESET_CYCLES + 3, left_cycles
+    assert RESET_CYCLES - 0.5 <= left_cycles <= RESET_CYCLES + 3, left_cycles   # t_us: the log line's time
     s = canload.master_stats(run["reset_log"], RESET_BUS)[-1]
     assert s["fault_resets"] >= 2 and s["reset_refused"] >= 1, s

@@ -51,7 +51,7 @@ static int cycles_to_enabled(struct co_master *m, int limit)
 static void resume(struct co_master *m)
 {
 	for (uint32_t i = 0; i < m->n_nodes; i++)
-		co_master_renew_enable(m, i);
+		co_master_acknowledge(m, i);
 }
 
 /* A drive that leaves Operational on its own (its communication error
@@ -74,9 +74,17 @@ static void test_heartbeat_not_operational(uint8_t state, uint16_t code)
 	CHECK_EQ(co_master_node(&m, 0)->nmt_state, state);
 	CHECK(co_master_node(&m, 0)->state402 != CO402_OPERATION_ENABLED);
 	CHECK_EQ(co_master_node(&m, 1)->fault, 0);
-	/* latched while it stays there, whatever the TPDO silence adds */
-	run(&m, 50);
+	/* latched while it stays there, whatever the TPDO silence adds, and
+	 * the enable request off for a cycle (Linux, as a program ends in
+	 * fault) is no acknowledgement */
+	run(&m, 20);
+	enable_all(&m, 0);
+	run(&m, 1);
+	enable_all(&m, 1);
+	run(&m, 30);
 	CHECK_EQ(co_master_node(&m, 0)->error_code, code);
+	CHECK_EQ(co_master_node(&m, 0)->nmt_lost, 1);
+	CHECK_EQ(drv[0].nmt, state);
 	CHECK_EQ(m.st.faults, 1);
 	CHECK_EQ(m.st.nmt_left, 1);
 	/* one acknowledgement: NMT start again, the enable sequence, enabled */
@@ -218,10 +226,9 @@ static void test_lost_nmt_start(void)
 	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_FAILED);
 	CHECK_EQ(m.st.start_retries, START_RETRIES);
 	CHECK_EQ(drv[0].nmt, 127);
-	/* the bus is back: a new enable request starts it over */
+	/* the bus is back: the acknowledgement starts it over */
 	drv[0].drop_nmt_start = 0;
-	enable_all(&m, 0);
-	run(&m, 1);
+	resume(&m);
 	c = cycles_to_enabled(&m, 300);
 	CHECK(c > 0);
 }

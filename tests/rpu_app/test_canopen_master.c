@@ -145,11 +145,16 @@ static void test_wrong_mapping_and_abort(void)
 	CHECK_EQ(m.st.rpdo_sent, 0);
 	CHECK_EQ(m.st.sync_sent, 60);
 
-	/* fixed, a new enable request retries the start-up */
+	/* fixed: the enable request off and on again is no acknowledgement */
 	drv[0].map1a00[2] = 0x60640020u;
 	enable_all(&m, 0);
 	run(&m, 1);
 	enable_all(&m, 1);
+	run(&m, 40);
+	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_FAILED);
+	CHECK_EQ(co_master_node(&m, 0)->error_code, CO_ERR_CONFIG);
+	/* the operator's acknowledgement retries the start-up */
+	co_master_acknowledge(&m, 0);
 	run(&m, 40);
 	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_OPERATIONAL);
 	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_OPERATION_ENABLED);
@@ -208,11 +213,18 @@ static void test_emcy_fault_and_reset(void)
 	run(&m, 5);
 	CHECK_EQ(co_master_node(&m, 1)->fault, 1);
 	CHECK_EQ(co_master_node(&m, 1)->state402, CO402_FAULT);
-	/* a new enable request: fault reset, then the sequence again */
+	/* the enable request off and on again (Linux does that when a
+	 * program ends in fault): no acknowledgement, no reset */
 	co_master_set(&m, 1, 0, drv[1].pos);
 	run(&m, 1);
-	drv[1].cw_hist_n = 0;
 	co_master_set(&m, 1, 1, drv[1].pos);
+	run(&m, 5);
+	CHECK_EQ(co_master_node(&m, 1)->fault, 1);
+	CHECK_EQ(co_master_node(&m, 1)->error_code, 0x8611);
+	CHECK_EQ(co_master_node(&m, 1)->state402, CO402_FAULT);
+	/* the acknowledgement: fault reset, then the sequence again */
+	drv[1].cw_hist_n = 0;
+	co_master_acknowledge(&m, 1);
 	run(&m, 8);
 	CHECK_EQ(co_master_node(&m, 1)->fault, 0);
 	CHECK_EQ(co_master_node(&m, 1)->error_code, 0);
@@ -283,10 +295,13 @@ static void test_heartbeat_consumer(void)
 	}
 	run(&m, 30);
 	CHECK_EQ(co_master_node(&m, 0)->phase, CO_PH_OPERATIONAL);
-	CHECK_EQ(co_master_node(&m, 0)->fault, 1);	/* latched until a new enable request */
+	CHECK_EQ(co_master_node(&m, 0)->fault, 1);	/* latched until acknowledged */
 	co_master_set(&m, 0, 0, 0);
 	run(&m, 1);
 	co_master_set(&m, 0, 1, drv[0].pos);
+	run(&m, 6);
+	CHECK_EQ(co_master_node(&m, 0)->fault, 1);	/* the enable again is none */
+	co_master_acknowledge(&m, 0);
 	run(&m, 6);
 	CHECK_EQ(co_master_node(&m, 0)->fault, 0);
 	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_OPERATION_ENABLED);
@@ -341,9 +356,9 @@ static void test_tx_full(void)
 	CHECK_EQ(co_master_node(&m, 0)->state402, CO402_READY_TO_SWITCH_ON);
 	/* the operator's acknowledgement (resume) with enable held: a new
 	 * enable request, the fault cleared, the drives enabled again */
-	co_master_renew_enable(&m, 0);
-	co_master_renew_enable(&m, 1);
-	co_master_renew_enable(&m, 7);	/* no such node: nothing */
+	co_master_acknowledge(&m, 0);
+	co_master_acknowledge(&m, 1);
+	co_master_acknowledge(&m, 7);	/* no such node: nothing */
 	run(&m, 8);
 	for (uint32_t i = 0; i < 2; i++) {
 		CHECK_EQ(co_master_node(&m, i)->fault, 0);

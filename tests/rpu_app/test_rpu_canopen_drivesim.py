@@ -58,7 +58,7 @@ def lib(tmp_path_factory):
     lib.co_master_rx.argtypes = [ctypes.c_void_p, ctypes.POINTER(CanFrame)]
     lib.co_master_cycle.argtypes = [ctypes.c_void_p]
     lib.co_master_set.argtypes = [ctypes.c_void_p, ctypes.c_uint32, ctypes.c_int, ctypes.c_int32]
-    lib.co_master_renew_enable.argtypes = [ctypes.c_void_p, ctypes.c_uint32]
+    lib.co_master_acknowledge.argtypes = [ctypes.c_void_p, ctypes.c_uint32]
     lib.shim_node.argtypes = [ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint32)]
     lib.shim_stats.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint32), ctypes.c_uint32]
     return lib
@@ -201,7 +201,7 @@ def test_slow_fault_reset_and_a_second_master(lib):
     hold(500)
     assert bus.node(1)["error_code"] == 0x2310 and bus.node(1)["state402"] == CO402_FAULT, bus.node(1)
     assert bus.node(0)["state402"] == CO402_OPERATION_ENABLED
-    bus.lib.co_master_renew_enable(bus.m, 1)
+    bus.lib.co_master_acknowledge(bus.m, 1)
     back = None
     for c in range(1, 200):
         hold(1)
@@ -217,7 +217,7 @@ def test_slow_fault_reset_and_a_second_master(lib):
     assert bus.node(0)["fault"] and bus.node(0)["error_code"] == 0xFF04, bus.node(0)
     hold(50)
     assert bus.node(0)["error_code"] == 0xFF04 and bus.drives[0].nmt.name == "PRE_OPERATIONAL"
-    bus.lib.co_master_renew_enable(bus.m, 0)
+    bus.lib.co_master_acknowledge(bus.m, 0)
     for c in range(1, 50):
         hold(1)
         if bus.enabled(2):
