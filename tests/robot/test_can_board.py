@@ -41,7 +41,6 @@ master; Linux sees the drives only through the feedback records:
 from __future__ import annotations
 
 import bisect
-import contextlib
 import functools
 import json
 import os
@@ -51,12 +50,13 @@ import subprocess
 import threading
 import time
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import can
 import pytest
 from mcap.reader import make_reader
 
+from can_board_faults import RESET_AXIS, RESET_BUS, RESET_CYCLES, RESET_TIMEOUT_MS, second_master, slow_fault_reset
 from servoamp import bridge, canload, netboard, qemu
 from servoamp.schemas import servoamp_pb2 as pb
 
@@ -82,9 +82,6 @@ CO_ERR_BUS_OFF = 0x8140                # the master's "recovered from bus off"
 HB_CONSUMER_MS = 60                    # servo.dts: can-heartbeat-consumer-ms
 EMCY_BOUND_CYCLES = 3                  # EMCY on the bus to the axis fault in the firmware
 NMT_BOUND_CYCLES = 2                   # another master's NMT on the bus to the axis fault
-RESET_AXIS, RESET_BUS, RESET_NODE = 3, 1, 2   # the drive whose fault reset is slow
-RESET_CYCLES = 30                      # SYNCs it needs to leave Fault (drive simulator)
-RESET_TIMEOUT_MS = 100                 # the master's fault reset time (axis_can.c)
 AXIS_LOG = re.compile(r"^axis(\d): can(\d) node (\d+): (.*?)(, fault,|,) error ([0-9a-f]{4}) "
                       r"\(cycle (\d+), t_us (\d+)\)", re.M)
 
@@ -199,8 +196,8 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
     out["busoff_log"] = servo.output
 
     # issue 33: another NMT master on the bus, then a slow fault reset
-    _second_master(cb, out)
-    _slow_fault_reset(cb, out)
+    second_master(cb, out, PROGRAM, AXES)
+    slow_fault_reset(cb, out)
 
     # faults, one per drive, each while the bus runs: injected through
     # the simulators' control sockets, seen by Linux in the feedback
@@ -224,90 +221,6 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
     out["fault_st"] = cb.status()
     out["servo_log"] = servo.output
     out["servod_log"] = cb.sh(f"cat {netboard.SERVOD_LOG}")
-
-
-@contextlib.contextmanager
-def _other_master(sock: Path) -> Iterator[can.BusABC]:
-    """A second NMT master on the bus: a passive python-can client of the
-    `servoamp` interface (QEMU never waits for it), read in a thread so
-    that its socket never fills while the test waits."""
-    bus = can.Bus(interface="servoamp", channel=str(sock))
-    stop = threading.Event()
-
-    def drain() -> None:
-        while not stop.is_set():
-            try:
-                bus.recv(0.2)
-            except can.CanOperationError:
-                return
-
-    th = threading.Thread(target=drain, daemon=True)
-    th.start()
-    try:
-        yield bus
-    finally:
-        stop.set()
-        th.join(timeout=5)
-        bus.shutdown()
-
-
-def _nmt(cs: int, node: int) -> can.Message:
-    return can.Message(arbitration_id=0x000, data=[cs, node], is_extended_id=False)
-
-
-def _second_master(cb: netboard.ControllerBoard, out: dict[str, Any]) -> None:
-    """A passive python-can client of can0 sends NMT 'enter pre-operational'
-    to node 1 (axis 0) while the program runs, then 'stop' to node 2
-    (axis 1); one resume brings both back."""
-    cb.sh_rc(f"ampctl run {PROGRAM} 2>&1", timeout=60)
-    out["nmt_prog_run"] = cb.wait_status(lambda st: st.get("program.state") == "running", 120,
-                                         "the program to run", raise_on_timeout=False)
-    with _other_master(cb.can_socks[0]) as other:
-        other.send(_nmt(0x80, 1))
-        out["nmt_preop"] = cb.wait_status(
-            lambda st: st.get("axis0.error") == "0xff04" and st.get("program.state") != "running", 120,
-            "axis0: error 0xff04 (pre-operational), the program ended", raise_on_timeout=False)
-        other.send(_nmt(0x02, 2))
-        out["nmt_stopped"] = cb.wait_status(lambda st: st.get("axis1.error") == "0xff05", 120,
-                                            "axis1: error 0xff05 (stopped)", raise_on_timeout=False)
-        if out["nmt_stopped"].get("axis1.error") != "0xff05":
-            # not detected (the master before issue 33): the other master
-            # starts its drives again, so the steps after this one can run
-            other.send(_nmt(0x01, 0))
-            cb.sh("sleep 0.2", timeout=120)
-    cb.sh("sleep 0.2", timeout=120)
-    cb.ampctl("resume", expected_rc=None)                 # once
-    out["nmt_enabled"] = cb.wait_status(
-        lambda st: _enabled(st) and all(st.get(f"axis{a}.error") == "0x0000" for a in range(AXES)), 240,
-        "every axis enabled again after one resume", raise_on_timeout=False)
-
-
-def _slow_fault_reset(cb: netboard.ControllerBoard, out: dict[str, Any]) -> None:
-    """Node 2 of can1 (axis 3) trips (over-current); its fault reset is
-    first refused, then takes RESET_CYCLES SYNCs; one resume each."""
-    ax = RESET_AXIS
-    cb.drives(RESET_BUS, f"fault-reset {RESET_NODE} never")
-    cb.drives(RESET_BUS, f"fault {RESET_NODE} over-current")
-    out["reset_fault"] = cb.wait_status(lambda st: st.get(f"axis{ax}.error") == "0x2310", 120,
-                                        f"axis{ax}: error 0x2310", raise_on_timeout=False)
-    cb.sh("sleep 0.1", timeout=120)
-    cb.ampctl("resume", expected_rc=None)
-    out["reset_refused"] = cb.wait_status(lambda st: st.get(f"axis{ax}.error") == "0xff09", 120,
-                                          f"axis{ax}: fault reset refused (0xff09)", raise_on_timeout=False)
-    cb.drives(RESET_BUS, f"fault-reset {RESET_NODE} {RESET_CYCLES}")
-    cb.ampctl("resume", expected_rc=None)                 # once
-    out["reset_enabled"] = cb.wait_status(
-        lambda st: _enabled(st) and st.get(f"axis{ax}.error") == "0x0000", 240,
-        f"axis{ax} enabled after one resume", raise_on_timeout=False)
-    cb.drives(RESET_BUS, f"fault-reset {RESET_NODE} 0")
-    # a statistics line of the bus from after the second reset
-    servo = cb.machine.uart(1) if cb.machine else None
-    assert servo is not None
-    n = len(canload.master_stats(servo.output, RESET_BUS))
-    deadline = time.monotonic() + 120
-    while len(canload.master_stats(servo.output, RESET_BUS)) <= n and time.monotonic() < deadline:
-        cb.sh("sleep 0.5", timeout=120)
-    out["reset_log"] = servo.output
 
 
 def test_bus_off_is_recovered(run: dict[str, Any]) -> None:
