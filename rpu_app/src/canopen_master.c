@@ -331,6 +331,7 @@ void co_master_rx(struct co_master *m, const struct can_frame *f)
 		n->state402 = (uint8_t)co_402_decode(n->statusword);
 		n->tpdo_seen = 1;
 		n->confirmed = 1;	/* a TPDO: the node is operational */
+		n->nmt_state = NMT_ST_OPERATIONAL;
 		n->tpdo_count++;
 		m->st.tpdo_rx++;
 		return;

@@ -153,7 +153,8 @@ struct co_node {
 	uint8_t node_id;	/* 1..127 */
 	uint8_t phase;		/* enum co_node_phase */
 	uint8_t state402;	/* enum co_402_state */
-	uint8_t nmt_state;	/* last heartbeat state (0 boot-up, 4, 5, 127), 0xFF none */
+	uint8_t nmt_state;	/* NMT state last seen (0 boot-up, 4, 5, 127; a heartbeat, another
+				 * master's NMT, 5 with a TPDO1), 0xFF none */
 	uint8_t step;		/* configuration step */
 	uint8_t sdo_busy;	/* a request is outstanding */
 	uint8_t tries;		/* NMT resets / SDO tries of the current step */

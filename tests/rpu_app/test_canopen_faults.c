@@ -95,6 +95,7 @@ static void test_heartbeat_not_operational(uint8_t state, uint16_t code)
 	CHECK_EQ(drv[0].nmt, 5);
 	CHECK_EQ(co_master_node(&m, 0)->error_code, 0);
 	CHECK_EQ(co_master_node(&m, 0)->nmt_lost, 0);
+	CHECK_EQ(co_master_node(&m, 0)->nmt_state, 5);	/* its TPDO says so before its heartbeat */
 }
 
 /* The same drive leaving silently between its heartbeats (20 ms apart
