@@ -240,8 +240,10 @@ struct sp_status {
  * model; otherwise a CANopen CiA 402 drive and its state as the master last
  * saw it (SP_DRIVE_*). Bits 16-31: the drive's last error code (EMCY, CiA
  * 301/402: 0x8611 following error, 0x2310 over-current, ...), 0 if none,
- * 0x8130 when its heartbeat went silent. Existing readers that test bits 0-4
- * are unaffected.
+ * 0x8130 when its heartbeat went silent, the master's own 0xFFxx codes
+ * (rpu_app/src/canopen_master.h CO_ERR_*). Bits 12-14: the drive's NMT
+ * state as the master last saw it (SP_NMT_*, 0 for the internal model or
+ * before any). Existing readers that test bits 0-4 are unaffected.
  */
 #define SP_AX_DRIVE_SHIFT 8
 #define SP_AX_DRIVE_MASK  (0xfu << SP_AX_DRIVE_SHIFT)
@@ -255,7 +257,7 @@ struct sp_status {
 
 /* SP_AX_DRIVE() values */
 #define SP_DRIVE_INTERNAL          0u	/* the firmware's own motor model */
-#define SP_DRIVE_OFFLINE           1u	/* no boot-up / heartbeat lost */
+#define SP_DRIVE_OFFLINE           1u	/* not following the PDOs: no boot-up, heartbeat lost, TPDO silent, left NMT Operational */
 #define SP_DRIVE_CONFIGURING       2u	/* NMT/SDO configuration by the master */
 #define SP_DRIVE_NOT_READY         3u	/* CiA 402 "Not ready to switch on" */
 #define SP_DRIVE_SWITCH_ON_DISABLED 4u
@@ -266,6 +268,18 @@ struct sp_status {
 #define SP_DRIVE_FAULT_REACTION    9u	/* "Fault reaction active" */
 #define SP_DRIVE_FAULT             10u
 #define SP_DRIVE_STATES            11u
+
+#define SP_AX_NMT_SHIFT 12
+#define SP_AX_NMT_MASK  (0x7u << SP_AX_NMT_SHIFT)
+#define SP_AX_NMT(sw)   (((sw) & SP_AX_NMT_MASK) >> SP_AX_NMT_SHIFT)
+#define SP_AX_MAKE_NMT(nmt) (((uint32_t)(nmt) << SP_AX_NMT_SHIFT) & SP_AX_NMT_MASK)
+/* SP_AX_NMT() values (CiA 301 NMT states) */
+#define SP_NMT_NONE            0u	/* internal model, or no heartbeat / NMT seen */
+#define SP_NMT_BOOTUP          1u
+#define SP_NMT_STOPPED         2u
+#define SP_NMT_OPERATIONAL     3u
+#define SP_NMT_PRE_OPERATIONAL 4u
+#define SP_NMT_STATES          5u
 
 /* servo line fault word while SAFESTOP (amp_servo_set_state) */
 #define SP_FAULT_NONE        0u

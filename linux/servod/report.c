@@ -50,6 +50,42 @@ static const char *drive_name(uint32_t d)
 	return d < SP_DRIVE_STATES ? names[d] : "?";
 }
 
+/* SP_AX_NMT() of a status word */
+static const char *nmt_name(uint32_t v)
+{
+	static const char *const names[SP_NMT_STATES] = {
+		[SP_NMT_NONE] = "-",
+		[SP_NMT_BOOTUP] = "boot-up",
+		[SP_NMT_STOPPED] = "stopped",
+		[SP_NMT_OPERATIONAL] = "operational",
+		[SP_NMT_PRE_OPERATIONAL] = "pre-operational",
+	};
+
+	return v < SP_NMT_STATES ? names[v] : "?";
+}
+
+/* What an axis's error code means when the CANopen master raised it
+ * itself (rpu_app/src/canopen_master.h CO_ERR_*); NULL for the drive's
+ * own EMCY codes (CiA 402: look them up in the drive's manual). */
+static const char *master_error(uint32_t code)
+{
+	switch (code) {
+	case 0x8130: return "heartbeat lost";
+	case 0x8140: return "bus off, controller restarted";
+	case 0xFF01: return "no boot-up after NMT reset";
+	case 0xFF02: return "configuration refused by drive";
+	case 0xFF03: return "drive restarted (boot-up while operational)";
+	case 0xFF04: return "drive left Operational: NMT pre-operational";
+	case 0xFF05: return "drive left Operational: NMT stopped";
+	case 0xFF06: return "no TPDO from the drive";
+	case 0xFF07: return "NMT start not confirmed";
+	case 0xFF08: return "PDO COB-ID not supported";
+	case 0xFF09: return "fault reset refused by drive";
+	case 0x1000: return "drive in Fault without EMCY";
+	default: return NULL;
+	}
+}
+
 static int req_status(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
 {
 	struct amp_peer_info pi = { 0 };
@@ -84,9 +120,17 @@ static int req_status(struct servod *sd, struct out *o, int argc, char **argv, c
 	supervisor_format(sd, o);
 	/* each axis's drive: the internal model or a CiA 402 drive's state and error code */
 	axes = sd->pset[SP_P_axes] < AMP_MAX_AXES ? sd->pset[SP_P_axes] : AMP_MAX_AXES;
-	for (uint32_t i = 0; i < axes; i++)
-		put(o, "axis%u.drive=%s axis%u.error=0x%04x\n", i, drive_name(SP_AX_DRIVE(ax_status[i])), i,
+	for (uint32_t i = 0; i < axes; i++) {
+		const char *why = master_error(SP_AX_ERROR(ax_status[i]));
+
+		put(o, "axis%u.drive=%s axis%u.error=0x%04x", i, drive_name(SP_AX_DRIVE(ax_status[i])), i,
 		    SP_AX_ERROR(ax_status[i]));
+		if (SP_AX_DRIVE(ax_status[i]) != SP_DRIVE_INTERNAL)	/* a CANopen drive's NMT state */
+			put(o, " axis%u.nmt=%s", i, nmt_name(SP_AX_NMT(ax_status[i])));
+		put(o, "\n");
+		if (why)
+			put(o, "axis%u.fault=%s\n", i, why);
+	}
 	prog_format_status(&sd->prog, o, cmd, act);
 	if (session_latched(&sd->session)) {
 		snprintf(msg, n, "fault latched (%s): the firmware is stopped; `ampctl fault reset` restarts it",

@@ -29,7 +29,8 @@ SYNC_ID = 0x080
 # the servo core's UART (rpu_app/src/canopen_master.c, docs/fieldbus.md).
 MASTER_FIELDS = ("bus", "nodes_op", "sync", "sync_missed", "rpdo", "rpdo_missed", "tpdo",
                  "pdo_missing", "pdo_missing_max", "emcy", "hb_timeouts", "faults", "sdo_ok",
-                 "sdo_fail", "rx_bad")
+                 "sdo_fail", "rx_bad", "pdo_timeouts", "nmt_left", "start_retries", "fault_resets",
+                 "reset_refused")
 _MASTER_RE = re.compile(r"^stats can=(\d+) " + " ".join(f"{f}=" + r"(\d+)" for f in MASTER_FIELDS[1:])
                         + r"\r?$", re.M)
 

@@ -12,7 +12,9 @@
  *                         axes of that bus fault with 0x8140), then every
  *                         frame the interrupt put in the ring goes to the
  *                         bus's master (TPDOs answering the last SYNC,
- *                         heartbeats, EMCY, SDO answers)
+ *                         heartbeats, EMCY, SDO answers), then its
+ *                         supervision (TPDO silence, heartbeat consumer,
+ *                         NMT start confirmation: co_master_supervise)
  *   can_cycle (per axis)  the axis's target and enable request for the
  *                         master; its feedback from the last TPDO1
  *   axis_can_cycle_end    each master's cycle: its time stamp when due
@@ -38,6 +40,8 @@
 #include "log.h"
 
 #define STEPS 4u	/* safe-stop ramp sub-steps per cycle, as the model's */
+#define CAN_PDO_TIMEOUT_CYCLES 2u	/* consecutive cycles without a drive's TPDO1: axis fault */
+#define CAN_FAULT_RESET_MS 100u		/* a drive has this long to leave Fault after the reset */
 #define NBUS (BOARD_CAN_COUNT ? BOARD_CAN_COUNT : 1u)
 
 struct can_axis {
@@ -48,7 +52,7 @@ struct can_axis {
 	uint8_t primed;		/* p1 valid */
 	uint8_t prev_valid;
 	uint8_t ss_active;	/* safe stop ramps the drive (it was enabled) */
-	uint8_t last_phase, last_state, last_fault;
+	uint8_t last_phase, last_state, last_fault, last_lost;
 	uint16_t last_error;
 	uint32_t last_st;	/* last cycle's status bits */
 	int32_t p1;		/* coarse target */
@@ -106,7 +110,7 @@ uint32_t axis_can_count(void)
 void axis_can_init(const struct axis_params *k)
 {
 	static const struct canps_filter filters[4] = {
-		{ 0x780u, 0x080u },	/* EMCY 0x081..0x0FF */
+		{ 0x700u, 0x000u },	/* NMT of another master 0x000, EMCY 0x081..0x0FF */
 		{ 0x780u, 0x180u },	/* TPDO1 */
 		{ 0x780u, 0x580u },	/* SDO answers */
 		{ 0x780u, 0x700u },	/* heartbeat, boot-up */
@@ -120,6 +124,14 @@ void axis_can_init(const struct axis_params *k)
 		.boot_retries = 3,
 		.sdo_retries = 2,
 		.stamp_ms = BOARD_CAN_TIME_STAMP_MS,
+		/* the supervision of an operational drive (docs/reliability.md):
+		 * NMT start confirmed within the SDO timeout, else sent again
+		 * 3 times; 2 cycles without TPDO1 fault the axis; a fault
+		 * reset is held up to 100 ms for the drive to leave Fault */
+		.start_timeout_ms = BOARD_CAN_SDO_TIMEOUT_MS,
+		.start_retries = 3,
+		.pdo_timeout_cycles = CAN_PDO_TIMEOUT_CYCLES,
+		.fault_reset_ms = CAN_FAULT_RESET_MS,
 	};
 	struct canps_timing t;
 
@@ -199,6 +211,7 @@ void axis_can_cycle_begin(void)
 		}
 		for (uint32_t n = 0; n < CANPS_RX_RING && canps_recv(&cb->dev, &f); n++)
 			co_master_rx(&cb->m, &f);
+		co_master_supervise(&cb->m);	/* its faults in this cycle's feedback */
 	}
 }
 
@@ -263,27 +276,36 @@ static void can_resume(uint32_t i)
 	cax[i].ss_active = 0;
 	/* resume acknowledges the drive's fault (a bus off, an EMCY...) */
 	if (cax[i].used && cax[i].bus < NBUS)
-		co_master_renew_enable(&bus[cax[i].bus].m, cax[i].idx);
+		co_master_acknowledge(&bus[cax[i].bus].m, cax[i].idx);
 }
 
 static void log_changes(uint32_t i, const struct co_node *n)
 {
 	struct can_axis *a = &cax[i];
+	const char *what;
 
 	if (n->phase == a->last_phase && n->state402 == a->last_state && n->fault == a->last_fault &&
-	    n->error_code == a->last_error)
+	    n->error_code == a->last_error && n->nmt_lost == a->last_lost)
 		return;
+	if (n->phase == CO_PH_FAILED && a->last_phase != CO_PH_FAILED && n->cfg_reason != CO_CFG_OK)
+		log_printf("axis%u: can%u node %u: configuration refused: %04x:%02x = %08x: %s\n", (unsigned)i,
+			   (unsigned)a->bus, (unsigned)a->node, (unsigned)n->cfg_index, (unsigned)n->cfg_sub,
+			   (unsigned)n->cfg_value, co_cfg_reason_name((enum co_cfg_reason)n->cfg_reason));
 	a->last_phase = n->phase;
 	a->last_state = n->state402;
 	a->last_fault = n->fault;
 	a->last_error = n->error_code;
+	a->last_lost = n->nmt_lost;
+	if (n->phase != CO_PH_OPERATIONAL)
+		what = co_phase_name((enum co_node_phase)n->phase);
+	else if (n->nmt_lost)
+		what = n->nmt_state == 0x04u ? "left operational: nmt stopped" : "left operational: nmt pre-operational";
+	else
+		what = co_402_name((enum co_402_state)n->state402);
 	/* what, then where in time: the master's cycle and the global timer */
 	log_printf("axis%u: can%u node %u: %s%s error %04x (cycle %u, t_us %u)\n", (unsigned)i,
-		   (unsigned)a->bus, (unsigned)a->node,
-		   n->phase == CO_PH_OPERATIONAL ? co_402_name((enum co_402_state)n->state402)
-						 : co_phase_name((enum co_node_phase)n->phase),
-		   n->fault ? ", fault," : ",", (unsigned)n->error_code, (unsigned)bus[a->bus].m.cycle,
-		   (unsigned)(gtimer_now() / BOARD_GTIMER_TICKS_PER_US));
+		   (unsigned)a->bus, (unsigned)a->node, what, n->fault ? ", fault," : ",", (unsigned)n->error_code,
+		   (unsigned)bus[a->bus].m.cycle, (unsigned)(gtimer_now() / BOARD_GTIMER_TICKS_PER_US));
 }
 
 static void can_cycle(uint32_t i, const struct axis_params *k, const struct axis_in *in,
@@ -357,6 +379,31 @@ static void can_cycle(uint32_t i, const struct axis_params *k, const struct axis
 	log_changes(i, n);
 }
 
+/* The NMT state as the status word carries it (SP_NMT_*). */
+static uint32_t nmt_bits(const struct co_node *n)
+{
+	switch (n->nmt_state) {
+	case 0x00u: return SP_AX_MAKE_NMT(SP_NMT_BOOTUP);
+	case 0x04u: return SP_AX_MAKE_NMT(SP_NMT_STOPPED);
+	case 0x05u: return SP_AX_MAKE_NMT(SP_NMT_OPERATIONAL);
+	case 0x7Fu: return SP_AX_MAKE_NMT(SP_NMT_PRE_OPERATIONAL);
+	default: return SP_AX_MAKE_NMT(SP_NMT_NONE);
+	}
+}
+
+/* An operational node that does not follow its PDOs: silent (heartbeat
+ * lost), out of NMT Operational, or without TPDO1 (now, or latched until
+ * the acknowledgement, so that Linux sees it for a cycle at least and a
+ * running program ends on it). */
+static int not_following(const struct co_node *n)
+{
+	if (n->fault && n->error_code == CO_ERR_HEARTBEAT && !n->hb_armed)
+		return 1;
+	if (n->nmt_lost || n->pdo_silent >= CAN_PDO_TIMEOUT_CYCLES)
+		return 1;
+	return n->fault && n->error_code == CO_ERR_PDO_TIMEOUT;
+}
+
 static uint32_t can_drive(uint32_t i)
 {
 	const struct co_node *n = node_of(i);
@@ -370,8 +417,8 @@ static uint32_t can_drive(uint32_t i)
 		state = SP_DRIVE_CONFIGURING;
 		break;
 	case CO_PH_OPERATIONAL:
-		if (n->fault && n->error_code == CO_ERR_HEARTBEAT && !n->hb_armed) {
-			state = SP_DRIVE_OFFLINE;	/* silent */
+		if (not_following(n)) {
+			state = SP_DRIVE_OFFLINE;
 			break;
 		}
 		switch (n->state402) {
@@ -390,7 +437,7 @@ static uint32_t can_drive(uint32_t i)
 		state = SP_DRIVE_OFFLINE;
 		break;
 	}
-	return SP_AX_MAKE_DRIVE(state, n->fault ? n->error_code : 0u);
+	return SP_AX_MAKE_DRIVE(state, n->fault ? n->error_code : 0u) | nmt_bits(n);
 }
 
 const struct axis_ops axis_can_ops = {
@@ -424,13 +471,16 @@ void axis_can_log_stats(void)
 			continue;
 		log_printf("stats can=%u nodes_op=%u sync=%u sync_missed=%u rpdo=%u rpdo_missed=%u tpdo=%u "
 			   "pdo_missing=%u pdo_missing_max=%u emcy=%u hb_timeouts=%u faults=%u sdo_ok=%u "
-			   "sdo_fail=%u rx_bad=%u\n",
+			   "sdo_fail=%u rx_bad=%u pdo_timeouts=%u nmt_left=%u start_retries=%u fault_resets=%u "
+			   "reset_refused=%u\n",
 			   (unsigned)b, (unsigned)s.co.nodes_operational, (unsigned)s.co.sync_sent,
 			   (unsigned)s.co.sync_missed, (unsigned)s.co.rpdo_sent, (unsigned)s.co.rpdo_missed,
 			   (unsigned)s.co.tpdo_rx, (unsigned)s.co.pdo_missing, (unsigned)s.co.pdo_missing_max,
 			   (unsigned)s.co.emcy, (unsigned)s.co.hb_timeouts, (unsigned)s.co.faults,
 			   (unsigned)s.co.sdo_ok, (unsigned)(s.co.sdo_abort + s.co.sdo_timeout + s.co.sdo_bad),
-			   (unsigned)s.co.rx_bad);
+			   (unsigned)s.co.rx_bad, (unsigned)s.co.pdo_timeouts, (unsigned)s.co.nmt_left,
+			   (unsigned)s.co.start_retries, (unsigned)s.co.fault_resets,
+			   (unsigned)s.co.fault_reset_refused);
 		log_printf("stats canps=%u tx=%u tx_busy=%u rx=%u rx_dropped=%u rx_fifo_overflow=%u ring_max=%u "
 			   "irqs=%u errors=%u tec=%u rec=%u error_passive=%u bus_off=%u recoveries=%u\n",
 			   (unsigned)b, (unsigned)s.can.tx_frames, (unsigned)s.can.tx_busy,

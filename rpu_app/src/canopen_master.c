@@ -1,59 +1,19 @@
 /* SPDX-License-Identifier: MIT */
 /*
  * canopen_master.c - CANopen master for CiA 402 drives in CSP (see
- * canopen_master.h). No transport, no globals, no allocation, no library
- * calls: built into the firmware and, unchanged, into the host unit test.
+ * canopen_master.h): frames in, the cycle, the supervision of operational
+ * nodes (heartbeat, NMT state, TPDO silence, NMT start confirmation) and
+ * the CiA 402 controlword with its fault reset. The start-up (NMT reset,
+ * SDO configuration, NMT start) is canopen_config.c. No transport, no
+ * globals, no allocation, no library calls: built into the firmware and,
+ * unchanged, into the host unit tests.
  */
 #include <stddef.h>
 #include <stdint.h>
 
-#include "canopen_master.h"
-
-#define COB_NMT 0x000u
-#define COB_SYNC 0x080u
-#define COB_EMCY 0x080u		/* + node */
-#define COB_TPDO1 0x180u	/* + node */
-#define COB_RPDO1 0x200u	/* + node */
-#define COB_SDO_TX 0x580u	/* server -> client, + node */
-#define COB_SDO_RX 0x600u	/* client -> server, + node */
-#define COB_HB 0x700u		/* + node */
-
-#define NMT_START 0x01u
-#define NMT_RESET_COMM 0x82u
+#include "canopen_internal.h"
 
 #define NO_NODE 0xFFu
-#define CO_ERR_DRIVE_FAULT 0x1000u	/* drive in Fault without an EMCY: generic error */
-
-/* One step of the SDO configuration. */
-enum { ST_WRITE, ST_READ };
-struct cfg_step {
-	uint8_t kind;
-	uint8_t sub;
-	uint8_t size;		/* write: bytes (1, 2, 4) */
-	uint8_t node_rel;	/* value / expected value + node id */
-	uint16_t index;
-	uint32_t value;		/* write: value; read: expected value under mask */
-	uint32_t mask;
-};
-
-#define HB_VALUE 0xFFFFFFFFu	/* placeholder: cfg.hb_producer_ms */
-
-static const struct cfg_step steps[] = {
-	{ ST_WRITE, 0, 1, 0, 0x6060, 8u, 0 },			/* modes of operation: CSP */
-	{ ST_READ, 0, 0, 0, 0x6061, 8u, 0xFFu },		/* modes of operation display */
-	{ ST_READ, 0, 0, 0, 0x1A00, 2u, 0xFFu },		/* TPDO1 mapping: 2 entries */
-	{ ST_READ, 1, 0, 0, 0x1A00, 0x60410010u, 0xFFFFFFFFu },	/* statusword, 16 bit */
-	{ ST_READ, 2, 0, 0, 0x1A00, 0x60640020u, 0xFFFFFFFFu },	/* position actual, 32 bit */
-	{ ST_READ, 0, 0, 0, 0x1600, 2u, 0xFFu },		/* RPDO1 mapping: 2 entries */
-	{ ST_READ, 1, 0, 0, 0x1600, 0x60400010u, 0xFFFFFFFFu },	/* controlword, 16 bit */
-	{ ST_READ, 2, 0, 0, 0x1600, 0x607A0020u, 0xFFFFFFFFu },	/* target position, 32 bit */
-	{ ST_READ, 1, 0, 1, 0x1800, COB_TPDO1, 0x800007FFu },	/* TPDO1 COB-ID, valid */
-	{ ST_READ, 1, 0, 1, 0x1400, COB_RPDO1, 0x800007FFu },	/* RPDO1 COB-ID, valid */
-	{ ST_WRITE, 2, 1, 0, 0x1800, 1u, 0 },			/* TPDO1 on every SYNC */
-	{ ST_WRITE, 2, 1, 0, 0x1400, 1u, 0 },			/* RPDO1 applied at SYNC */
-	{ ST_WRITE, 0, 2, 0, 0x1017, HB_VALUE, 0 },		/* heartbeat producer time */
-};
-#define N_STEPS (sizeof(steps) / sizeof(steps[0]))
 
 static uint32_t ms_to_cycles(uint32_t ms, uint32_t period_us)
 {
@@ -65,85 +25,13 @@ static uint32_t ms_to_cycles(uint32_t ms, uint32_t period_us)
 	return c ? c : 1u;
 }
 
-static uint32_t rd_le(const uint8_t *p, uint32_t n)
+const char *co_nmt_name(uint8_t st)
 {
-	uint32_t v = 0;
-
-	for (uint32_t i = 0; i < n && i < 4u; i++)
-		v |= (uint32_t)p[i] << (8u * i);
-	return v;
-}
-
-static void wr_le(uint8_t *p, uint32_t v, uint32_t n)
-{
-	for (uint32_t i = 0; i < n && i < 4u; i++)
-		p[i] = (uint8_t)(v >> (8u * i));
-}
-
-static void frame_clear(struct can_frame *f)
-{
-	f->id = 0;
-	f->dlc = 0;
-	f->rtr = 0;
-	for (uint32_t i = 0; i < 8u; i++)
-		f->data[i] = 0;
-}
-
-static int tx(struct co_master *m, const struct can_frame *f)
-{
-	if (m->send(m->ctx, f)) {
-		m->st.tx_busy++;
-		return -1;
-	}
-	return 0;
-}
-
-static int expired(const struct co_master *m, uint32_t deadline)
-{
-	return (int32_t)(m->cycle - deadline) >= 0;
-}
-
-static void raise_fault(struct co_master *m, struct co_node *n, uint16_t code)
-{
-	if (n->fault)
-		return;	/* the first cause is kept */
-	n->fault = 1;
-	n->error_code = code;
-	m->st.faults++;
-}
-
-enum co_402_state co_402_decode(uint16_t sw)
-{
-	if ((sw & 0x4Fu) == 0x00u)
-		return CO402_NOT_READY;
-	if ((sw & 0x4Fu) == 0x40u)
-		return CO402_SWITCH_ON_DISABLED;
-	if ((sw & 0x6Fu) == 0x21u)
-		return CO402_READY_TO_SWITCH_ON;
-	if ((sw & 0x6Fu) == 0x23u)
-		return CO402_SWITCHED_ON;
-	if ((sw & 0x6Fu) == 0x27u)
-		return CO402_OPERATION_ENABLED;
-	if ((sw & 0x6Fu) == 0x07u)
-		return CO402_QUICK_STOP_ACTIVE;
-	if ((sw & 0x4Fu) == 0x0Fu)
-		return CO402_FAULT_REACTION_ACTIVE;
-	if ((sw & 0x4Fu) == 0x08u)
-		return CO402_FAULT;
-	return CO402_UNKNOWN;
-}
-
-const char *co_402_name(enum co_402_state s)
-{
-	switch (s) {
-	case CO402_NOT_READY: return "not ready to switch on";
-	case CO402_SWITCH_ON_DISABLED: return "switch on disabled";
-	case CO402_READY_TO_SWITCH_ON: return "ready to switch on";
-	case CO402_SWITCHED_ON: return "switched on";
-	case CO402_OPERATION_ENABLED: return "operation enabled";
-	case CO402_QUICK_STOP_ACTIVE: return "quick stop active";
-	case CO402_FAULT_REACTION_ACTIVE: return "fault reaction active";
-	case CO402_FAULT: return "fault";
+	switch (st) {
+	case NMT_ST_BOOTUP: return "boot-up";
+	case NMT_ST_STOPPED: return "stopped";
+	case NMT_ST_OPERATIONAL: return "operational";
+	case NMT_ST_PREOP: return "pre-operational";
 	default: return "unknown";
 	}
 }
@@ -160,6 +48,11 @@ const char *co_phase_name(enum co_node_phase p)
 	case CO_PH_FAILED: return "failed";
 	default: return "unknown";
 	}
+}
+
+static uint32_t or_default(uint32_t v, uint32_t def)
+{
+	return v ? v : def;
 }
 
 int co_master_init(struct co_master *m, co_send_fn send, void *ctx, const struct co_config *cfg,
@@ -179,6 +72,12 @@ int co_master_init(struct co_master *m, co_send_fn send, void *ctx, const struct
 	m->sdo_timeout_cycles = ms_to_cycles(cfg->sdo_timeout_ms, cfg->period_us);
 	m->boot_timeout_cycles = ms_to_cycles(cfg->boot_timeout_ms, cfg->period_us);
 	m->stamp_cycles = cfg->stamp_ms ? ms_to_cycles(cfg->stamp_ms, cfg->period_us) : 0u;
+	m->start_timeout_cycles =
+		ms_to_cycles(or_default(cfg->start_timeout_ms, CO_DEFAULT_START_TIMEOUT_MS), cfg->period_us);
+	m->start_retries = or_default(cfg->start_retries, CO_DEFAULT_START_RETRIES);
+	m->pdo_timeout_cycles = or_default(cfg->pdo_timeout_cycles, CO_DEFAULT_PDO_TIMEOUT_CYCLES);
+	m->fault_reset_cycles =
+		ms_to_cycles(or_default(cfg->fault_reset_ms, CO_DEFAULT_FAULT_RESET_MS), cfg->period_us);
 	for (uint32_t i = 0; i < n_nodes; i++) {
 		uint8_t id = node_ids[i];
 
@@ -215,11 +114,11 @@ void co_master_time_stamp(struct co_master *m, uint32_t now_us)
 {
 	struct can_frame f;
 
-	frame_clear(&f);
+	co_frame_clear(&f);
 	f.id = CO_COB_TIME_STAMP;
 	f.dlc = 4;
-	wr_le(f.data, now_us, 4);
-	if (tx(m, &f) == 0)
+	co_wr_le(f.data, now_us, 4);
+	if (co_tx(m, &f) == 0)
 		m->st.stamps_sent++;
 }
 
@@ -241,10 +140,10 @@ void co_master_stats(const struct co_master *m, struct co_stats *out)
 	*out = m->st;
 }
 
-void co_master_renew_enable(struct co_master *m, uint32_t idx)
+void co_master_acknowledge(struct co_master *m, uint32_t idx)
 {
 	if (idx < m->n_nodes)
-		m->node[idx].enable_prev = 0;
+		m->node[idx].ack_req = 1;
 }
 
 void co_master_bus_off(struct co_master *m)
@@ -254,100 +153,124 @@ void co_master_bus_off(struct co_master *m)
 		struct co_node *n = &m->node[i];
 
 		if (n->phase == CO_PH_OPERATIONAL)
-			raise_fault(m, n, CO_ERR_BUS_OFF);
+			co_raise_fault(m, n, CO_ERR_BUS_OFF);
 		n->tpdo_seen = 1;	/* the frames of this cycle are lost, not missing */
 	}
 }
 
-/* ---- SDO client (expedited only) ----------------------------------- */
+/* ---- supervision ---------------------------------------------------- */
 
-static int sdo_send_step(struct co_master *m, struct co_node *n)
+/* A fault that names a cause replaces a latched TPDO timeout (its
+ * symptom: a node that went silent or left Operational stops its TPDOs
+ * long before its heartbeat says why); otherwise the first cause is kept. */
+static void refine_fault(struct co_master *m, struct co_node *n, uint16_t code)
 {
-	const struct cfg_step *s = &steps[n->step];
-	struct can_frame f;
+	if (n->fault && n->error_code == CO_ERR_PDO_TIMEOUT)
+		n->error_code = code;
+	else
+		co_raise_fault(m, n, code);
+}
 
-	frame_clear(&f);
-	f.id = COB_SDO_RX + n->node_id;
-	f.dlc = 8;
-	if (s->kind == ST_WRITE) {
-		uint32_t v = s->value == HB_VALUE ? m->cfg.hb_producer_ms : s->value;
+/* The node reports (heartbeat) or was sent (another master's NMT) a state
+ * other than Operational after its start was confirmed: it does not
+ * follow the PDOs any more, its 402 state is unknown from here on. */
+static void left_operational(struct co_master *m, struct co_node *n, uint8_t state)
+{
+	if (!n->nmt_lost)
+		m->st.nmt_left++;
+	n->nmt_lost = 1;
+	n->state402 = CO402_UNKNOWN;
+	n->reset_active = 0;
+	refine_fault(m, n, state == NMT_ST_STOPPED ? CO_ERR_NMT_STOPPED : CO_ERR_NMT_PREOP);
+}
 
-		/* initiate download, expedited, size indicated: n = 4 - size */
-		f.data[0] = (uint8_t)(0x23u | ((4u - s->size) << 2));
-		wr_le(&f.data[4], v, s->size);
-	} else {
-		f.data[0] = 0x40u;	/* initiate upload */
+/* An NMT state seen for an operational node: confirms its start, or
+ * tells that it left Operational. */
+static void nmt_state_seen(struct co_master *m, struct co_node *n, uint8_t state)
+{
+	if (n->phase != CO_PH_OPERATIONAL)
+		return;
+	if (state == NMT_ST_OPERATIONAL) {
+		n->confirmed = 1;
+		return;
 	}
-	wr_le(&f.data[1], s->index, 2);
-	f.data[3] = s->sub;
-	if (tx(m, &f))
-		return -1;	/* tried again next cycle */
-	n->sdo_busy = 1;
-	n->deadline = m->cycle + m->sdo_timeout_cycles;
-	m->st.sdo_req++;
-	return 0;
+	/* before the confirmation a heartbeat may still be the one sent
+	 * before the NMT start: the start's own timeout decides */
+	if (n->confirmed)
+		left_operational(m, n, state);
 }
 
-static void config_failed(struct co_master *m, struct co_node *n)
+static void rx_heartbeat(struct co_master *m, struct co_node *n, const struct can_frame *f)
 {
-	n->phase = CO_PH_FAILED;
-	n->sdo_busy = 0;
-	raise_fault(m, n, CO_ERR_CONFIG);
-}
+	uint8_t state;
 
-static void sdo_rx(struct co_master *m, struct co_node *n, const struct can_frame *f)
-{
-	const struct cfg_step *s;
-	uint8_t cs;
-	uint32_t v, size;
-
-	if (f->dlc != 8u) {
+	if (f->dlc < 1u) {
 		m->st.rx_bad++;
 		return;
 	}
-	if (n->phase != CO_PH_CONFIG || !n->sdo_busy || n->step >= N_STEPS) {
-		m->st.rx_ignored++;	/* late answer to a timed-out request */
+	state = f->data[0] & 0x7Fu;
+	if (state != NMT_ST_BOOTUP && state != NMT_ST_STOPPED && state != NMT_ST_OPERATIONAL &&
+	    state != NMT_ST_PREOP) {
+		m->st.rx_bad++;	/* no NMT state: not a heartbeat to trust */
 		return;
 	}
-	s = &steps[n->step];
-	if (rd_le(&f->data[1], 2) != s->index || f->data[3] != s->sub) {
-		m->st.sdo_bad++;	/* an answer to another request */
+	m->st.hb_rx++;
+	n->nmt_state = state;
+	n->hb_last = m->cycle;
+	if (state != NMT_ST_BOOTUP) {
+		if (n->phase == CO_PH_OPERATIONAL)
+			n->hb_armed = 1;
+		nmt_state_seen(m, n, state);
+		return;
+	}
+	/* boot-up */
+	m->st.bootups++;
+	if (n->phase == CO_PH_BOOT_WAIT || n->phase == CO_PH_CONFIG || n->phase == CO_PH_START ||
+	    n->phase == CO_PH_OPERATIONAL) {
+		if (n->phase == CO_PH_OPERATIONAL)
+			co_raise_fault(m, n, CO_ERR_RESTARTED);
+		/* (re)configure: the node is pre-operational now */
+		co_config_restart(n);
+		n->hb_armed = 0;
+		n->pos_valid = 0;
+		n->state402 = CO402_UNKNOWN;
+		n->nmt_lost = 0;
+		n->confirmed = 0;
+		n->reset_active = 0;
+	}
+}
+
+/* An NMT command on the bus from another master (ours are not received
+ * back): stop and enter pre-operational take the node out of Operational
+ * at once; its next heartbeat will say so too. */
+static void rx_foreign_nmt(struct co_master *m, const struct can_frame *f)
+{
+	uint8_t cs, id, state;
+
+	if (f->dlc != 2u || f->rtr) {
+		m->st.rx_bad++;
 		return;
 	}
 	cs = f->data[0];
-	n->sdo_busy = 0;
-	if (cs == 0x80u) {
-		n->sdo_abort = rd_le(&f->data[4], 4);
-		m->st.sdo_abort++;
-		config_failed(m, n);
+	id = f->data[1];
+	if (cs == NMT_STOP)
+		state = NMT_ST_STOPPED;
+	else if (cs == NMT_ENTER_PREOP)
+		state = NMT_ST_PREOP;
+	else {
+		m->st.rx_ignored++;	/* start, resets: the heartbeat / boot-up tells */
 		return;
 	}
-	if (s->kind == ST_WRITE) {
-		if (cs != 0x60u) {
-			m->st.sdo_bad++;
-			config_failed(m, n);
-			return;
-		}
-	} else {
-		/* initiate upload response: scs 2, expedited (e) required */
-		if ((cs & 0xE0u) != 0x40u || !(cs & 0x02u)) {
-			m->st.sdo_bad++;	/* segmented transfers are not supported */
-			config_failed(m, n);
-			return;
-		}
-		size = (cs & 0x01u) ? 4u - ((cs >> 2) & 3u) : 4u;
-		v = rd_le(&f->data[4], size);
-		if ((v & s->mask) != ((s->value + (s->node_rel ? n->node_id : 0u)) & s->mask)) {
-			m->st.sdo_bad++;	/* wrong mode or mapping */
-			config_failed(m, n);
-			return;
-		}
+	for (uint32_t i = 0; i < m->n_nodes; i++) {
+		struct co_node *n = &m->node[i];
+
+		if (id != 0u && id != n->node_id)
+			continue;
+		m->st.nmt_foreign++;
+		n->nmt_state = state;
+		if (n->phase == CO_PH_OPERATIONAL && n->confirmed)
+			left_operational(m, n, state);
 	}
-	m->st.sdo_ok++;
-	n->tries = 0;
-	n->step++;
-	if (n->step >= N_STEPS)
-		n->phase = CO_PH_START;
 }
 
 /* ---- receive ------------------------------------------------------- */
@@ -362,11 +285,14 @@ void co_master_rx(struct co_master *m, const struct can_frame *f)
 		m->st.rx_bad++;
 		return;
 	}
+	if (f->id == COB_NMT) {
+		rx_foreign_nmt(m, f);
+		return;
+	}
 	fn = f->id & 0x780u;	/* function code */
 	id = f->id & 0x7Fu;	/* node id */
-	if (fn == COB_NMT || (fn == COB_SYNC && id == 0u) || id == 0u || m->index_of[id] == NO_NODE ||
-	    fn == COB_RPDO1 || fn == COB_SDO_RX) {
-		m->st.rx_ignored++;	/* NMT, SYNC, other nodes, other masters' requests */
+	if (fn == COB_NMT || id == 0u || m->index_of[id] == NO_NODE || fn == COB_RPDO1 || fn == COB_SDO_RX) {
+		m->st.rx_ignored++;	/* SYNC, other nodes, other masters' requests */
 		return;
 	}
 	n = &m->node[m->index_of[id]];
@@ -382,11 +308,11 @@ void co_master_rx(struct co_master *m, const struct can_frame *f)
 			m->st.rx_bad++;
 			return;
 		}
-		code = (uint16_t)rd_le(&f->data[0], 2);
+		code = (uint16_t)co_rd_le(&f->data[0], 2);
 		n->emcy_last = code;
 		if (code) {	/* 0x0000: error reset / no error */
 			m->st.emcy++;
-			raise_fault(m, n, code);
+			co_raise_fault(m, n, code);
 		}
 		return;
 	}
@@ -395,54 +321,26 @@ void co_master_rx(struct co_master *m, const struct can_frame *f)
 			m->st.rx_bad++;
 			return;
 		}
-		if (n->phase != CO_PH_OPERATIONAL) {
+		if (n->phase != CO_PH_OPERATIONAL || n->nmt_lost) {
 			m->st.rx_ignored++;
 			return;
 		}
-		n->statusword = (uint16_t)rd_le(&f->data[0], 2);
-		n->pos_actual = (int32_t)rd_le(&f->data[2], 4);
+		n->statusword = (uint16_t)co_rd_le(&f->data[0], 2);
+		n->pos_actual = (int32_t)co_rd_le(&f->data[2], 4);
 		n->pos_valid = 1;
 		n->state402 = (uint8_t)co_402_decode(n->statusword);
 		n->tpdo_seen = 1;
+		n->confirmed = 1;	/* a TPDO: the node is operational */
+		n->nmt_state = NMT_ST_OPERATIONAL;
 		n->tpdo_count++;
 		m->st.tpdo_rx++;
 		return;
 	case COB_SDO_TX:
-		sdo_rx(m, n, f);
+		co_sdo_rx(m, n, f);
 		return;
-	case COB_HB: {
-		uint8_t state;
-
-		if (f->dlc < 1u) {
-			m->st.rx_bad++;
-			return;
-		}
-		state = f->data[0] & 0x7Fu;
-		m->st.hb_rx++;
-		n->nmt_state = state;
-		n->hb_last = m->cycle;
-		if (state != 0u) {
-			if (n->phase == CO_PH_OPERATIONAL)
-				n->hb_armed = 1;
-			return;
-		}
-		/* boot-up */
-		m->st.bootups++;
-		if (n->phase == CO_PH_BOOT_WAIT || n->phase == CO_PH_CONFIG || n->phase == CO_PH_START ||
-		    n->phase == CO_PH_OPERATIONAL) {
-			if (n->phase == CO_PH_OPERATIONAL)
-				raise_fault(m, n, CO_ERR_RESTARTED);
-			/* (re)configure: the node is pre-operational now */
-			n->phase = CO_PH_CONFIG;
-			n->step = 0;
-			n->tries = 0;
-			n->sdo_busy = 0;
-			n->hb_armed = 0;
-			n->pos_valid = 0;
-			n->state402 = CO402_UNKNOWN;
-		}
+	case COB_HB:
+		rx_heartbeat(m, n, f);
 		return;
-	}
 	default:
 		m->st.rx_ignored++;
 		return;
@@ -451,103 +349,10 @@ void co_master_rx(struct co_master *m, const struct can_frame *f)
 
 /* ---- cycle --------------------------------------------------------- */
 
-static void startup_step(struct co_master *m, struct co_node *n)
-{
-	struct can_frame f;
-
-	switch (n->phase) {
-	case CO_PH_RESET:
-		frame_clear(&f);
-		f.id = COB_NMT;
-		f.dlc = 2;
-		f.data[0] = NMT_RESET_COMM;
-		f.data[1] = n->node_id;
-		if (tx(m, &f))
-			return;
-		m->st.nmt_sent++;
-		n->phase = CO_PH_BOOT_WAIT;
-		n->deadline = m->cycle + m->boot_timeout_cycles;
-		return;
-	case CO_PH_BOOT_WAIT:
-		if (!expired(m, n->deadline))
-			return;
-		if (++n->tries > m->cfg.boot_retries) {
-			n->phase = CO_PH_FAILED;
-			raise_fault(m, n, CO_ERR_BOOT_TIMEOUT);
-		} else {
-			n->phase = CO_PH_RESET;
-		}
-		return;
-	case CO_PH_CONFIG:
-		if (n->sdo_busy) {
-			if (!expired(m, n->deadline))
-				return;
-			n->sdo_busy = 0;
-			m->st.sdo_timeout++;
-			if (++n->tries > m->cfg.sdo_retries) {
-				config_failed(m, n);
-				return;
-			}
-		}
-		if (n->step < N_STEPS)
-			(void)sdo_send_step(m, n);
-		return;
-	case CO_PH_START:
-		frame_clear(&f);
-		f.id = COB_NMT;
-		f.dlc = 2;
-		f.data[0] = NMT_START;
-		f.data[1] = n->node_id;
-		if (tx(m, &f))
-			return;
-		m->st.nmt_sent++;
-		n->phase = CO_PH_OPERATIONAL;
-		n->hb_last = m->cycle;
-		n->hb_armed = 1;
-		n->tpdo_seen = 1;	/* no TPDO expected before the first SYNC */
-		n->fault_reset = 0;
-		return;
-	default:
-		return;
-	}
-}
-
-static uint16_t controlword(struct co_master *m, struct co_node *n)
-{
-	int rising = n->enable_req && !n->enable_prev;
-
-	n->enable_prev = n->enable_req;
-	if (rising && n->fault) {
-		n->fault = 0;	/* a new enable request acknowledges the fault */
-		n->error_code = 0;
-	}
-	if (rising && (n->state402 == CO402_FAULT))
-		n->fault_reset = 1;
-	if (n->fault_reset) {
-		n->fault_reset = 0;
-		return CO_CW_FAULT_RESET;	/* rising edge of bit 7 (the last word had it clear) */
-	}
-	if (n->state402 == CO402_FAULT && !n->fault && n->enable_req)
-		raise_fault(m, n, n->emcy_last ? n->emcy_last : CO_ERR_DRIVE_FAULT);
-	if (!n->enable_req || n->fault)
-		return n->state402 == CO402_QUICK_STOP_ACTIVE ? CO_CW_DISABLE_VOLTAGE : CO_CW_SHUTDOWN;
-	switch (n->state402) {
-	case CO402_READY_TO_SWITCH_ON:
-		return CO_CW_SWITCH_ON;
-	case CO402_SWITCHED_ON:
-	case CO402_OPERATION_ENABLED:
-		return CO_CW_ENABLE_OPERATION;
-	case CO402_QUICK_STOP_ACTIVE:
-		return CO_CW_DISABLE_VOLTAGE;
-	default:	/* switch on disabled, not ready, fault reaction, unknown */
-		return CO_CW_SHUTDOWN;
-	}
-}
-
 static void send_rpdo(struct co_master *m, struct co_node *n)
 {
 	struct can_frame f;
-	uint16_t cw = controlword(m, n);
+	uint16_t cw = co_controlword(m, n);
 	int32_t tgt;
 
 	/* The target follows the drive until it runs enabled, so that the
@@ -556,52 +361,107 @@ static void send_rpdo(struct co_master *m, struct co_node *n)
 		tgt = n->target;
 	else
 		tgt = n->pos_valid ? n->pos_actual : n->target;
-	frame_clear(&f);
+	co_frame_clear(&f);
 	f.id = COB_RPDO1 + n->node_id;
 	f.dlc = 6;
-	wr_le(&f.data[0], cw, 2);
-	wr_le(&f.data[2], (uint32_t)tgt, 4);
-	if (tx(m, &f)) {
-		m->st.rpdo_missed++;
+	co_wr_le(&f.data[0], cw, 2);
+	co_wr_le(&f.data[2], (uint32_t)tgt, 4);
+	if (co_tx(m, &f)) {
+		m->st.rpdo_missed++;	/* a reset word is sent again next cycle */
 		return;
 	}
+	if (n->reset_active && (cw & CO_CW_FAULT_RESET))
+		n->reset_sent = 1;
 	n->controlword = cw;
 	n->target_sent = tgt;
 	m->st.rpdo_sent++;
 }
 
-void co_master_cycle(struct co_master *m)
+/* One operational node at the start of a cycle: the NMT start's
+ * confirmation, TPDO silence, the heartbeat consumer. Returns 1 when the
+ * node's TPDO1 of the last SYNC is missing. */
+static int supervise(struct co_master *m, struct co_node *n)
 {
-	struct can_frame f;
-	uint32_t missing = 0, operational = 0;
+	int missing = !n->tpdo_seen;
 
+	if (!n->confirmed) {
+		if (co_expired(m, n->deadline)) {
+			if (n->start_tries >= m->start_retries) {
+				n->phase = CO_PH_FAILED;
+				co_raise_fault(m, n, CO_ERR_NMT_START);
+				return 0;
+			}
+			n->start_tries++;	/* NMT start lost: sent again this cycle */
+			m->st.start_retries++;
+			n->phase = CO_PH_START;
+		}
+		return 0;	/* no TPDO expected before the start is confirmed */
+	}
+	if (missing) {
+		if (n->pdo_silent < 0xFFu)
+			n->pdo_silent++;
+		if (n->pdo_silent >= m->pdo_timeout_cycles && !n->fault) {
+			m->st.pdo_timeouts++;
+			co_raise_fault(m, n, CO_ERR_PDO_TIMEOUT);
+		}
+	} else {
+		n->pdo_silent = 0;
+	}
+	if (n->hb_armed && m->cycle - n->hb_last > m->hb_consumer_cycles) {
+		n->hb_armed = 0;	/* re-armed by the next heartbeat */
+		m->st.hb_timeouts++;
+		refine_fault(m, n, CO_ERR_HEARTBEAT);
+	}
+	return missing;
+}
+
+void co_master_supervise(struct co_master *m)
+{
+	uint32_t missing = 0;
+
+	if (m->supervised)
+		return;
+	m->supervised = 1;
 	m->cycle++;
 	m->st.cycles++;
-	for (uint32_t i = 0; i < m->n_nodes; i++) {
-		struct co_node *n = &m->node[i];
-
-		if (n->phase == CO_PH_OPERATIONAL) {
-			if (!n->tpdo_seen)
-				missing++;
-			if (n->hb_armed && m->cycle - n->hb_last > m->hb_consumer_cycles) {
-				n->hb_armed = 0;	/* re-armed by the next heartbeat */
-				m->st.hb_timeouts++;
-				raise_fault(m, n, CO_ERR_HEARTBEAT);
-			}
-		} else if (n->phase == CO_PH_FAILED && n->enable_req && !n->enable_prev) {
-			n->phase = CO_PH_RESET;	/* a new enable request retries the start-up */
-			n->tries = 0;
-			n->fault = 0;	/* and acknowledges the fault */
-			n->error_code = 0;
-		}
-		if (n->phase != CO_PH_OPERATIONAL)
-			n->enable_prev = n->enable_req;
-		startup_step(m, n);
-	}
+	for (uint32_t i = 0; i < m->n_nodes; i++)
+		if (m->node[i].phase == CO_PH_OPERATIONAL)
+			missing += (uint32_t)supervise(m, &m->node[i]);
 	m->st.pdo_missing += missing;
 	m->st.pdo_missing_last = missing;
 	if (missing > m->st.pdo_missing_max)
 		m->st.pdo_missing_max = missing;
+}
+
+void co_master_cycle(struct co_master *m)
+{
+	struct can_frame f;
+	uint32_t operational = 0;
+
+	co_master_supervise(m);	/* if the caller did not, after the frames */
+	m->supervised = 0;
+	for (uint32_t i = 0; i < m->n_nodes; i++) {
+		struct co_node *n = &m->node[i];
+
+		if (n->ack_req) {
+			n->ack_req = 0;
+			co_acknowledge(m, n);
+			if (n->phase == CO_PH_OPERATIONAL && n->nmt_lost) {
+				/* out of Operational: NMT start again, then the
+				 * enable sequence (and a fault reset if the drive
+				 * turns out to be in Fault) */
+				n->ack_wait = 1;
+				n->nmt_lost = 0;
+				n->start_tries = 0;
+				n->phase = CO_PH_START;
+			} else if (n->phase == CO_PH_FAILED) {
+				n->phase = CO_PH_RESET;	/* the start-up from its beginning */
+				n->tries = 0;
+				n->cfg_reason = CO_CFG_OK;
+			}
+		}
+		co_startup_step(m, n);
+	}
 
 	for (uint32_t i = 0; i < m->n_nodes; i++) {
 		struct co_node *n = &m->node[i];
@@ -613,9 +473,9 @@ void co_master_cycle(struct co_master *m)
 	}
 	m->st.nodes_operational = operational;
 
-	frame_clear(&f);
+	co_frame_clear(&f);
 	f.id = COB_SYNC;
-	if (tx(m, &f)) {
+	if (co_tx(m, &f)) {
 		m->st.sync_missed++;
 		return;
 	}

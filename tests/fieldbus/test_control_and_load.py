@@ -42,8 +42,15 @@ def test_control_answers_and_injects(tmp_path: Path) -> None:
         assert ctl.short.shorted(10**9 + 20 * 10**6 - 1) and not ctl.short.shorted(10**9 + 20 * 10**6)
         assert control_request(ctl.path, "bus-short 0").startswith("error: bus-short 0")
         assert control_request(ctl.path, "bus-short x").startswith("error: bus-short 'x'")
+        assert control_request(ctl.path, "fault-reset 2 30") == "ok fault-reset 2 30"
+        assert drives[1].fault_reset_cycles == 30 and drives[0].fault_reset_cycles == 0
+        assert control_request(ctl.path, "fault-reset 1 never") == "ok fault-reset 1 never"
+        assert drives[0].fault_reset_cycles is None
+        assert control_request(ctl.path, "fault-reset 9 3").startswith("error: no drive 9")
+        assert control_request(ctl.path, "fault-reset 2 -3").startswith("error: fault reset")
         st = control_request(ctl.path, "state")
         assert st.startswith("ok 1: ") and "; 2: " in st
+        assert "fault_reset=never" in st and "fault_reset=30" in st
     finally:
         stop.set()
         th.join()

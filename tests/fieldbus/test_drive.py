@@ -14,7 +14,7 @@ from fieldbus_helpers import (NMT_PRE_OP, NMT_RESET_NODE, NMT_START, NMT_STOP, e
                               sdo_download, sdo_response, sdo_upload, tpdo1)
 from servoamp.drivesim import cia402
 from servoamp.drivesim.cia402 import State
-from servoamp.drivesim.drive import Drive, FaultKind, Frame, Injection
+from servoamp.drivesim.drive import Drive, FaultKind, Frame, Injection, parse_reset_cycles
 from servoamp.drivesim.model import Motor
 
 MS = 1_000_000
@@ -24,8 +24,9 @@ NODE = 3
 class Bench:
     """One drive and a guest clock."""
 
-    def __init__(self, faults: list[Injection] | None = None, node: int = NODE) -> None:
-        self.drive = Drive(node, faults=faults or [])
+    def __init__(self, faults: list[Injection] | None = None, node: int = NODE,
+                 fault_reset_cycles: int | None = 0) -> None:
+        self.drive = Drive(node, faults=faults or [], fault_reset_cycles=fault_reset_cycles)
         self.node = node
         self.t = 0
         self.boot = self.drive.boot(0)
@@ -232,6 +233,62 @@ def test_motor_model_settles_and_limits_acceleration() -> None:
     m2.step(0, 1e6, 0.01, True)
     assert abs(m2.acc) <= 1e3 and m2.vel <= 10.0 + 1e-9
     assert m2.current_pm == pytest.approx(1000)
+
+
+def _tripped(cycles: int | None) -> Bench:
+    """A drive in Fault (over-current), its fault reset taking ``cycles``."""
+    b = Bench([Injection(NODE, FaultKind.OVER_CURRENT, 5 * MS)], fault_reset_cycles=cycles)
+    b.enable()
+    for _ in range(3):
+        sw, _, _ = b.cycle(0x0F, 0)
+    assert cia402.state_of(sw) == State.FAULT and b.drive.read(0x603F) == 0x2310
+    sw, _, _ = b.cycle(0x00, 0)                         # bit 7 clear before the edge
+    return b
+
+
+@pytest.mark.parametrize("cycles", [1, 2, 30, 50])
+def test_slow_fault_reset_takes_its_cycles_with_bit_7_held(cycles: int) -> None:
+    b = _tripped(cycles)
+    states = []
+    for k in range(cycles + 3):
+        sw, _, out = b.cycle(0x80, 0)                   # the edge, then held
+        states.append(cia402.state_of(sw))
+        if states[-1] != State.FAULT:
+            assert [emcy(f.data) for f in out if f.can_id == 0x80 + NODE] == [(0, 0)]
+            break
+    # the edge is applied at its SYNC; the drive leaves Fault `cycles` SYNCs later
+    assert states == [State.FAULT] * cycles + [State.SWITCH_ON_DISABLED], states
+    assert b.drive.read(0x603F) == 0 and b.drive.read(0x1001) == 0
+
+
+def test_slow_fault_reset_abandoned_without_bit_7_and_never() -> None:
+    b = _tripped(5)
+    b.cycle(0x80, 0)
+    b.cycle(0x80, 0)
+    for _ in range(10):                                 # the bit dropped: the reset is abandoned
+        sw, _, _ = b.cycle(0x06, 0)
+    assert cia402.state_of(sw) == State.FAULT
+    for _ in range(6):                                  # a new edge, held: it completes
+        sw, _, _ = b.cycle(0x80, 0)
+    assert cia402.state_of(sw) == State.SWITCH_ON_DISABLED
+    b = _tripped(None)
+    for _ in range(500):
+        sw, _, _ = b.cycle(0x80, 0)
+    assert cia402.state_of(sw) == State.FAULT and b.drive.read(0x603F) == 0x2310
+    # the default: at the edge (CiA 402 transition 15)
+    b = _tripped(0)
+    sw, _, _ = b.cycle(0x80, 0)
+    assert cia402.state_of(sw) == State.SWITCH_ON_DISABLED
+
+
+def test_reset_cycles_parse() -> None:
+    assert parse_reset_cycles("30") == (None, 30)
+    assert parse_reset_cycles("2:50") == (2, 50)
+    assert parse_reset_cycles("never") == (None, None)
+    assert parse_reset_cycles("3:never") == (3, None)
+    for bad in ("x", "2:", "0:5", "128:5", "2:-1", "2:x:3"):
+        with pytest.raises(ValueError):
+            parse_reset_cycles(bad)
 
 
 def test_injection_parse() -> None:

@@ -22,6 +22,16 @@ master; Linux sees the drives only through the feedback records:
   the bus's axes with 0x8140, and `ampctl resume` enables them again; the
   logger (a canlink listener) and the bridge hold the destroyed attempts as
   error frames;
+* a second NMT master on can0 (a passive python-can client of the
+  `servoamp` interface) sends node 1 to pre-operational while a program
+  runs and node 2 to stopped (issue 33): each axis faults within
+  NMT_BOUND_CYCLES of the command on the bus with its code and NMT state
+  in `ampctl status`, the program ends in fault naming the drive, and one
+  `ampctl resume` starts both drives again and enables them;
+* a slow fault reset (issue 33): the drive simulator's node 2 on can1
+  first refuses its fault reset ("fault reset refused by drive", 0xff09,
+  after the master's 100 ms), then needs RESET_CYCLES SYNCs: one `ampctl
+  resume` enables it;
 * the bridge (servoamp bridge, can_links) carries every frame: its MCAP
   holds each frame the loggers hold while it ran, on the cycle records'
   clock (each SYNC in its cycle), and the Foxglove WebSocket protocol's
@@ -46,6 +56,7 @@ import can
 import pytest
 from mcap.reader import make_reader
 
+from can_board_faults import RESET_AXIS, RESET_BUS, RESET_CYCLES, RESET_TIMEOUT_MS, second_master, slow_fault_reset
 from servoamp import bridge, canload, netboard, qemu
 from servoamp.schemas import servoamp_pb2 as pb
 
@@ -70,6 +81,7 @@ SHORT_BUS, SHORT_MS = 1, 20            # the bus short: can1 for 20 ms of guest 
 CO_ERR_BUS_OFF = 0x8140                # the master's "recovered from bus off"
 HB_CONSUMER_MS = 60                    # servo.dts: can-heartbeat-consumer-ms
 EMCY_BOUND_CYCLES = 3                  # EMCY on the bus to the axis fault in the firmware
+NMT_BOUND_CYCLES = 2                   # another master's NMT on the bus to the axis fault
 AXIS_LOG = re.compile(r"^axis(\d): can(\d) node (\d+): (.*?)(, fault,|,) error ([0-9a-f]{4}) "
                       r"\(cycle (\d+), t_us (\d+)\)", re.M)
 
@@ -163,7 +175,7 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
 
     # bus off: the drive simulator shorts can1 for SHORT_MS; every frame is
     # destroyed, the controller goes bus off, the firmware restarts it and
-    # faults the bus's axes with 0x8140; a new enable request (resume)
+    # faults the bus's axes with 0x8140; the operator's resume
     # acknowledges it and the axes are enabled again
     short_axes = [a for a in range(AXES) if a // 2 == SHORT_BUS]
     out["short_ans"] = cb.drives(SHORT_BUS, f"bus-short {SHORT_MS}")
@@ -182,6 +194,10 @@ def _board_steps(cb: netboard.ControllerBoard, servo: Any, br: bridge.Bridge, ou
         assert time.monotonic() < deadline, "no CAN statistics after the bus off"
         time.sleep(1)
     out["busoff_log"] = servo.output
+
+    # issue 33: another NMT master on the bus, then a slow fault reset
+    second_master(cb, out, PROGRAM, AXES)
+    slow_fault_reset(cb, out)
 
     # faults, one per drive, each while the bus runs: injected through
     # the simulators' control sockets, seen by Linux in the feedback
@@ -473,3 +489,73 @@ def test_drive_faults_reach_linux_with_their_codes(run: dict[str, Any]) -> None:
             cycles = (t_fault - emcy[0]) * 1e9 / PERIOD_NS
             print(f"\naxis{axis} ({kind}): EMCY {code:04x} on the bus, axis fault {cycles:.2f} cycles later")
             assert 0 <= cycles <= EMCY_BOUND_CYCLES, cycles
+
+
+def _axis_lines(log: str, axis: int) -> list[re.Match[str]]:
+    return [m for m in AXIS_LOG.finditer(log) if int(m.group(1)) == axis]
+
+
+def test_a_second_nmt_master_faults_the_axes(run: dict[str, Any]) -> None:
+    """Issue 33: a drive sent to pre-operational or stopped by another
+    master faults its axis within NMT_BOUND_CYCLES, with its NMT state and
+    code in `ampctl status`, and ends the running program; one resume
+    restarts and enables both."""
+    assert run["nmt_prog_run"].get("program.state") == "running", run["nmt_prog_run"]
+    st = run["nmt_preop"]
+    assert st.get("axis0.error") == "0xff04", st
+    assert st["axis0.drive"] == "offline" and st["axis0.nmt"] == "pre-operational", st
+    assert st["axis0.fault"] == "drive left Operational: NMT pre-operational", st
+    assert st["program.state"] == "fault" and "axis 0 drive fault 0xff04" in st["program.error"], st
+    st = run["nmt_stopped"]
+    assert st.get("axis1.error") == "0xff05", st
+    assert st["axis1.drive"] == "offline" and st["axis1.nmt"] == "stopped", st
+    assert st["axis1.fault"] == "drive left Operational: NMT stopped", st
+    en = run["nmt_enabled"]
+    assert _enabled(en) and all(en[f"axis{a}.error"] == "0x0000" for a in range(AXES)), en
+    assert all(en[f"axis{a}.nmt"] == "operational" for a in range(AXES)), en
+    # within NMT_BOUND_CYCLES of the command's end on the bus (the logger's
+    # time, the firmware's through the master's time stamps)
+    off = _bus_offset_us(run, 0)
+    nmts = [(f.t, f.data) for f in canload.read_log(run["asc"][0]) if f.can_id == 0x000 and len(f.data) == 2]
+    for axis, cmd, code in ((0, b"\x80\x01", "ff04"), (1, b"\x02\x02", "ff05")):
+        t_cmd = [t for t, d in nmts if d == cmd]
+        assert t_cmd, f"no NMT {cmd.hex()} in the logger's file: {nmts}"
+        faults = [m for m in _axis_lines(run["servo_log"], axis) if m.group(5) == ", fault," and m.group(6) == code]
+        assert faults, f"axis{axis}: no fault line with {code}"
+        cycles = ((int(faults[0].group(8)) - off) / 1e6 - t_cmd[0]) * 1e9 / PERIOD_NS
+        print(f"\naxis{axis}: NMT {cmd.hex()} of a second master on the bus, axis fault {code} "
+              f"{cycles:.2f} cycles later ({faults[0].group(4)})")
+        assert 0 <= cycles <= NMT_BOUND_CYCLES, cycles
+        assert "left operational" in faults[0].group(4)
+
+
+def test_a_slow_fault_reset_takes_one_resume(run: dict[str, Any]) -> None:
+    """Issue 33: a drive that never leaves Fault reports "fault reset
+    refused by drive" after the master's reset time; one that needs
+    RESET_CYCLES SYNCs is enabled by one resume."""
+    ax = RESET_AXIS
+    assert run["reset_fault"].get(f"axis{ax}.error") == "0x2310", run["reset_fault"]
+    st = run["reset_refused"]
+    assert st.get(f"axis{ax}.error") == "0xff09", st
+    assert st[f"axis{ax}.fault"] == "fault reset refused by drive" and st[f"axis{ax}.drive"] == "fault", st
+    en = run["reset_enabled"]
+    assert _enabled(en) and en[f"axis{ax}.error"] == "0x0000", en
+    # from the firmware's log: the refusal RESET_TIMEOUT_MS after the first
+    # acknowledgement, and the drive out of Fault RESET_CYCLES cycles after
+    # the second (the acknowledgement: state fault, no fault latched)
+    lines = _axis_lines(run["reset_log"], ax)
+    i_trip = max(k for k, m in enumerate(lines) if m.group(6) == "2310" and m.group(5) == ", fault,")
+    seq = lines[i_trip:]
+    acks = [k for k, m in enumerate(seq) if m.group(4) == "fault" and m.group(5) == "," and m.group(6) == "0000"]
+    refused = [k for k, m in enumerate(seq) if m.group(6) == "ff09"]
+    assert len(acks) >= 2 and refused and acks[0] < refused[0] < acks[1], [m.group(0) for m in seq]
+    t_us = [int(m.group(8)) for m in seq]
+    refused_ms = (t_us[refused[0]] - t_us[acks[0]]) / 1e3
+    left = next(k for k in range(acks[1], len(seq)) if seq[k].group(4) == "switch on disabled")
+    left_cycles = (t_us[left] - t_us[acks[1]]) * 1000 / PERIOD_NS
+    print(f"\naxis{ax}: fault reset refused {refused_ms:.1f} ms after the acknowledgement; with a drive "
+          f"needing {RESET_CYCLES} SYNCs, out of Fault {left_cycles:.1f} cycles after one resume")
+    assert RESET_TIMEOUT_MS - 2 <= refused_ms <= RESET_TIMEOUT_MS + 2, refused_ms
+    assert RESET_CYCLES - 0.5 <= left_cycles <= RESET_CYCLES + 3, left_cycles   # t_us: the log line's time
+    s = canload.master_stats(run["reset_log"], RESET_BUS)[-1]
+    assert s["fault_resets"] >= 2 and s["reset_refused"] >= 1, s

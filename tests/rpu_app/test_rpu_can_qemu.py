@@ -182,8 +182,9 @@ def test_four_can_axes_two_per_bus(can_build, tmp_path, monkeypatch):
 def test_drive_faults_reach_the_axis(can_build, tmp_path, monkeypatch):
     """Faults injected in the simulated drives (guest time): node 2's
     over-current becomes axis 1's fault with the drive's EMCY code 0x2310
-    within 2 cycles; node 1 dropping off the bus is caught by the heartbeat
-    consumer (60 ms, producer 20 ms) as 0x8130."""
+    within 2 cycles; node 1 dropping off the bus faults its axis within 3
+    cycles (2 cycles without its TPDO, 0xff06, issue 33), and the heartbeat
+    consumer (60 ms, producer 20 ms) then names it silent: 0x8130."""
     t_oc, t_off = 1.0, 1.5
     with _rig(can_build, tmp_path, [0], 0x3, monkeypatch,
               ("--fault", f"2:over-current@{t_oc}", "--fault", f"1:off-bus@{t_off}")) as q:
@@ -192,8 +193,11 @@ def test_drive_faults_reach_the_axis(can_build, tmp_path, monkeypatch):
                                                    q.uart_text(), re.M)]
         assert max(en) < t_oc * 1e6, f"drives enabled only at t_us {en}: after the injections"
         oc = q.wait_uart(LINE_RE.format(i=1, b=0, node=2, what=r"[a-z ]+, fault", err="2310"), timeout=180)[0]
+        pdo = q.wait_uart(LINE_RE.format(i=0, b=0, node=1, what=r"[a-z ]+, fault", err="ff06"), timeout=180)[0]
         off = q.wait_uart(LINE_RE.format(i=0, b=0, node=1, what=r"[a-z ]+, fault", err="8130"), timeout=180)[0]
-        t1, t0 = int(oc.group(2)), int(off.group(2))
+        t1, t0, tp = int(oc.group(2)), int(off.group(2)), int(pdo.group(2))
+        print(f"off the bus at t_us {t_off * 1e6:.0f}: no TPDO fault at t_us {tp}")
+        assert 0 <= tp - t_off * 1e6 <= 3_000 + 1_000
         print(f"over-current seen at t_us {t1} (injected {t_oc * 1e6:.0f}); silence caught at t_us {t0} "
               f"(injected {t_off * 1e6:.0f})")
         assert 0 <= t1 - t_oc * 1e6 <= 2_000 + 1_000

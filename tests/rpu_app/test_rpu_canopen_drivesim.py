@@ -7,8 +7,9 @@ the master sends reaches both drives at its guest time, their answers
 reach the master before the next 1 ms cycle. A protocol cross-check
 without QEMU: start-up (NMT, SDO configuration accepted by the drive's
 object dictionary), the enable sequence, targets followed in CSP, an
-injected EMCY fault and a drive off the bus. Skipped without the drive
-simulator."""
+injected EMCY fault and a drive off the bus; a fault reset the drive
+takes 40 cycles for, and another NMT master sending a drive to
+pre-operational (issue 33). Skipped without the drive simulator."""
 from __future__ import annotations
 
 import ctypes
@@ -45,7 +46,8 @@ def lib(tmp_path_factory):
         pytest.skip("no host C compiler")
     so = tmp_path_factory.mktemp("co") / "libcomaster.so"
     subprocess.run(["cc", "-std=c11", "-O1", "-g", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC",
-                    f"-I{SRC}", str(SRC / "canopen_master.c"), str(HERE / "canopen_shim.c"), "-o", str(so)],
+                    f"-I{SRC}", *(str(SRC / f) for f in ("canopen_master.c", "canopen_config.c", "canopen_drive.c")),
+                    str(HERE / "canopen_shim.c"), "-o", str(so)],
                    check=True)
     lib = ctypes.CDLL(str(so))
     lib.shim_master_size.restype = ctypes.c_size_t
@@ -56,6 +58,7 @@ def lib(tmp_path_factory):
     lib.co_master_rx.argtypes = [ctypes.c_void_p, ctypes.POINTER(CanFrame)]
     lib.co_master_cycle.argtypes = [ctypes.c_void_p]
     lib.co_master_set.argtypes = [ctypes.c_void_p, ctypes.c_uint32, ctypes.c_int, ctypes.c_int32]
+    lib.co_master_acknowledge.argtypes = [ctypes.c_void_p, ctypes.c_uint32]
     lib.shim_node.argtypes = [ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_uint32)]
     lib.shim_stats.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_uint32), ctypes.c_uint32]
     return lib
@@ -64,11 +67,11 @@ def lib(tmp_path_factory):
 class Bus:
     """The master and N simulated drives on one bus, in guest time."""
 
-    def __init__(self, lib, nodes: list[int], faults: list[str] = ()):
+    def __init__(self, lib, nodes: list[int], faults: list[str] = (), fault_reset_cycles: int | None = 0):
         drive = pytest.importorskip("servoamp.drivesim.drive")
         self.lib = lib
         inj = [drive.Injection.parse(f) for f in faults]
-        self.drives = [drive.Drive(n, faults=inj) for n in nodes]
+        self.drives = [drive.Drive(n, faults=inj, fault_reset_cycles=fault_reset_cycles) for n in nodes]
         self.t_ns = 0
         self.inbox: list[tuple[int, bytes]] = []
         self.m = ctypes.create_string_buffer(lib.shim_master_size())
@@ -100,6 +103,18 @@ class Bus:
         self.tx_t = 0
         self.lib.co_master_cycle(self.m)
         self.t_ns += PERIOD_NS
+
+    def other_master_nmt(self, cs: int, node: int) -> None:
+        """An NMT command of a second master on the bus: the drives get it
+        now, the master with the next cycle's frames."""
+        data = bytes([cs, node])
+        for d in self.drives:
+            self._deliver(d.on_frame(0x000, data, self.t_ns + self.tx_t))
+        self.inbox.append((0x000, data))
+
+    def enabled(self, n: int) -> bool:
+        return all(self.node(i)["state402"] == CO402_OPERATION_ENABLED and not self.node(i)["fault"]
+                   for i in range(n))
 
     def set(self, idx: int, enable: bool, target: int) -> None:
         self.lib.co_master_set(self.m, idx, int(enable), target)
@@ -163,6 +178,48 @@ def test_simulated_faults_become_axis_faults(lib):
                 seen[i] = (bus.t_ns, n["error_code"])
     print(seen)
     assert seen[1][1] == 0x2310 and 0 <= seen[1][0] - 500_000_000 <= 3_000_000, seen
-    assert seen[0][1] == 0x8130 and 40_000_000 <= seen[0][0] - 800_000_000 <= 62_000_000, seen
+    # off the bus: 2 cycles without its TPDO fault the axis (0xFF06); the
+    # heartbeat consumer then names the cause (0x8130, silent)
+    assert seen[0][1] == 0xFF06 and 0 <= seen[0][0] - 800_000_000 <= 4_000_000, seen
+    assert bus.node(0)["error_code"] == 0x8130, bus.node(0)
     assert bus.stats()["emcy"] >= 1 and bus.stats()["hb_timeouts"] == 1
     assert bus.node(1)["state402"] == CO402_FAULT
+
+
+def test_slow_fault_reset_and_a_second_master(lib):
+    """A drive that needs 40 SYNCs to leave Fault is enabled by one
+    acknowledgement (the servo's resume); another master's NMT 'enter
+    pre-operational' faults the axis in the next cycle with 0xFF04."""
+    bus = Bus(lib, [1, 2], ["2:over-current@0.3"], fault_reset_cycles=40)
+
+    def hold(n: int) -> None:
+        for _ in range(n):
+            for i in range(2):
+                bus.set(i, True, bus.node(i)["pos_actual"])
+            bus.cycle()
+
+    hold(500)
+    assert bus.node(1)["error_code"] == 0x2310 and bus.node(1)["state402"] == CO402_FAULT, bus.node(1)
+    assert bus.node(0)["state402"] == CO402_OPERATION_ENABLED
+    bus.lib.co_master_acknowledge(bus.m, 1)
+    back = None
+    for c in range(1, 200):
+        hold(1)
+        if bus.enabled(2):
+            back = c
+            break
+    print(f"a drive needing 40 cycles to leave Fault: enabled {back} cycles after one resume")
+    assert back is not None and 40 < back <= 46, (back, bus.node(1))
+    assert bus.stats()["faults"] == 1
+    # a second master sends node 1 to pre-operational
+    bus.other_master_nmt(0x80, 1)
+    hold(1)
+    assert bus.node(0)["fault"] and bus.node(0)["error_code"] == 0xFF04, bus.node(0)
+    hold(50)
+    assert bus.node(0)["error_code"] == 0xFF04 and bus.drives[0].nmt.name == "PRE_OPERATIONAL"
+    bus.lib.co_master_acknowledge(bus.m, 0)
+    for c in range(1, 50):
+        hold(1)
+        if bus.enabled(2):
+            break
+    assert bus.enabled(2) and bus.drives[0].nmt.name == "OPERATIONAL", (bus.node(0), c)

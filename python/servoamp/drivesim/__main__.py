@@ -4,6 +4,7 @@ ACTIVE canlink client (docs/fieldbus.md, docs/canlink.md).
 
     servoamp-drivesim --socket build/can0.sock --nodes 1,2 [--eds FILE]
                       [--fault NODE:KIND@T_S ...] [--bus-short T_S:MS ...]
+                      [--fault-reset-cycles [NODE:]N|never ...]
 
 One loop: read a frame, hand it to every drive with its guest time, send
 their answers, then DONE. No host timers: what the drives do depends only
@@ -28,7 +29,7 @@ import time
 from pathlib import Path
 
 from servoamp import canlink
-from servoamp.drivesim.drive import EDS, FAULT_ALIASES, Drive, Frame, Injection
+from servoamp.drivesim.drive import EDS, FAULT_ALIASES, Drive, Frame, Injection, parse_reset_cycles
 
 
 def parse_nodes(text: str) -> list[int]:
@@ -109,7 +110,10 @@ class Control:
       time is the fault's; ``-v`` logs it);
     - ``bus-short MS``: short the bus for MS ms of guest time from the
       next frame (every frame destroyed by a bus error, see BusShort);
-    - ``state``: each drive's node id, CiA 402 state, NMT state, off-bus.
+    - ``fault-reset NODE CYCLES|never``: the SYNCs drive NODE needs to
+      leave Fault after a fault reset from now on (Drive.fault_reset_cycles);
+    - ``state``: each drive's node id, CiA 402 state, NMT state, off-bus,
+      fault reset cycles.
 
     Polled once per frame, so it acts only while the bus carries traffic
     (the master's SYNC every cycle)."""
@@ -148,10 +152,21 @@ class Control:
                 return f"error: bus-short {ms}: 1..60000 ms"
             self.short.request(ms)
             return f"ok bus-short {ms}"
+        if len(words) == 3 and words[0] == "fault-reset":
+            try:
+                rnode, cycles = parse_reset_cycles(f"{words[1]}:{words[2]}")
+            except ValueError as exc:
+                return f"error: {exc}"
+            if rnode is None or rnode not in self.drives:
+                return f"error: no drive {rnode} (drives {sorted(self.drives)})"
+            self.drives[rnode].fault_reset_cycles = cycles
+            return f"ok fault-reset {rnode} {'never' if cycles is None else cycles}"
         if words == ["state"]:
-            return "ok " + "; ".join(f"{n}: {d.state.name} nmt={d.nmt.name} off_bus={int(d.off_bus)}"
-                                     for n, d in sorted(self.drives.items()))
-        return "error: requests are 'fault NODE KIND', 'bus-short MS' and 'state'"
+            return "ok " + "; ".join(
+                f"{n}: {d.state.name} nmt={d.nmt.name} off_bus={int(d.off_bus)} "
+                f"fault_reset={'never' if d.fault_reset_cycles is None else d.fault_reset_cycles}"
+                for n, d in sorted(self.drives.items()))
+        return "error: requests are 'fault NODE KIND', 'bus-short MS', 'fault-reset NODE CYCLES|never' and 'state'"
 
     def poll(self) -> None:
         while select.select([self.sock], [], [], 0)[0]:
@@ -249,6 +264,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bus-short", action="append", default=[], metavar="T_S:MS",
                     help="short the bus from T_S s of guest time for MS ms: every frame destroyed "
                     "by a bus error (the controller goes bus off)")
+    ap.add_argument("--fault-reset-cycles", action="append", default=[], metavar="[NODE:]N|never",
+                    help="SYNCs a drive needs to leave Fault after a fault reset, bit 7 held (default 0: "
+                    "at once; never: the fault does not clear); without NODE every drive (repeatable)")
     ap.add_argument("--wait", type=float, default=10.0,
                     help="seconds to wait for the socket to appear (default 10)")
     ap.add_argument("--control", metavar="PATH",
@@ -262,12 +280,20 @@ def main(argv: list[str] | None = None) -> int:
         nodes = parse_nodes(args.nodes)
         faults = [Injection.parse(f) for f in args.fault]
         short = BusShort([BusShort.parse(t) for t in args.bus_short])
+        resets = [parse_reset_cycles(t) for t in args.fault_reset_cycles]
     except ValueError as exc:
         ap.error(str(exc))
     unknown = sorted({f.node for f in faults} - set(nodes))
     if unknown:
         ap.error(f"--fault for node(s) not simulated: {unknown}")
-    drives = [Drive(n, args.eds, faults) for n in nodes]
+    unknown = sorted({n for n, _ in resets if n is not None} - set(nodes))
+    if unknown:
+        ap.error(f"--fault-reset-cycles for node(s) not simulated: {unknown}")
+    reset_of: dict[int, int | None] = {}
+    for node, cycles in resets:            # in order: a later one wins
+        for n in nodes if node is None else [node]:
+            reset_of[n] = cycles
+    drives = [Drive(n, args.eds, faults, reset_of.get(n, 0)) for n in nodes]
     try:
         link = connect(args.socket, args.wait)
     except (OSError, canlink.ProtocolError) as exc:

@@ -141,14 +141,38 @@ class _Pdo:
         return sum(bits for _, _, bits in self.mapping) // 8
 
 
+def parse_reset_cycles(text: str) -> tuple[int | None, int | None]:
+    """``[NODE:]CYCLES`` or ``[NODE:]never`` (--fault-reset-cycles): the node
+    (None: every drive) and the SYNCs a fault reset takes (None: never)."""
+    node_s, _, value = text.rpartition(":")
+    try:
+        node = int(node_s, 0) if node_s else None
+        cycles = None if value.strip().lower() == "never" else int(value, 0)
+    except ValueError:
+        raise ValueError(f"fault reset {text!r}: want [NODE:]CYCLES or [NODE:]never") from None
+    if (node is not None and not 1 <= node <= 127) or (cycles is not None and not 0 <= cycles <= 100_000):
+        raise ValueError(f"fault reset {text!r}: node 1..127, cycles 0..100000 or never")
+    return node, cycles
+
+
 class Drive:
-    """A CiA 402 drive with CANopen node id ``node_id``."""
+    """A CiA 402 drive with CANopen node id ``node_id``.
+
+    ``fault_reset_cycles``: how many SYNCs the drive needs to leave Fault
+    after the rising edge of the controlword's fault reset bit (7), with the
+    bit held all along (a word without it abandons the reset, as a drive
+    that samples the bit when its reset completes does); 0 (default): at
+    the edge, as the standard's transition 15; None: never (a fault that
+    does not clear)."""
 
     def __init__(self, node_id: int, eds: Path | str = EDS,
-                 faults: tuple[Injection, ...] | list[Injection] = ()) -> None:
+                 faults: tuple[Injection, ...] | list[Injection] = (),
+                 fault_reset_cycles: int | None = 0) -> None:
         if not 1 <= node_id <= 127:
             raise ValueError(f"node id {node_id} not in 1..127")
         self.node_id = node_id
+        self.fault_reset_cycles = fault_reset_cycles
+        self.reset_left: int | None = None     # SYNCs left of a running fault reset (-1: never ends)
         self.eds = str(eds)
         self.injections = sorted((f for f in faults if f.node == node_id), key=lambda f: f.t_ns)
         self.motor = Motor()
@@ -176,6 +200,7 @@ class Drive:
 
     def _reset_application_state(self) -> None:
         self.state = State.NOT_READY
+        self.reset_left = None
         self.controlword = 0
         self.mode = 0
         self.error_code = 0
@@ -316,12 +341,26 @@ class Drive:
 
     def _apply_controlword(self, cw: int) -> None:
         prev, self.controlword = self.controlword, cw
+        if self.state == State.FAULT and self.fault_reset_cycles != 0:
+            if cw & cia402.CW_FAULT_RESET and not prev & cia402.CW_FAULT_RESET:
+                n = self.fault_reset_cycles
+                self.reset_left = -1 if n is None else n
+                log.info("node %d: fault reset begun (%s SYNCs) at %.6f s", self.node_id,
+                         "never" if n is None else n, self.t_ns / 1e9)
+            elif not cw & cia402.CW_FAULT_RESET:
+                self.reset_left = None         # bit 7 dropped: the reset is abandoned
+            return
         new = cia402.transition(self.state, cw, prev)
         if self.state == State.FAULT and new != State.FAULT:
-            self._emcy_pending.append((ERR_RESET, 0))
-            self.error_code = 0
-            self.error_register = 0
+            self._leave_fault()
         self._set_state(new)
+
+    def _leave_fault(self) -> None:
+        self._emcy_pending.append((ERR_RESET, 0))
+        self.error_code = 0
+        self.error_register = 0
+        self.reset_left = None
+        self._set_state(State.SWITCH_ON_DISABLED)
 
     def _trip(self, code: int, register: int) -> None:
         if self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
@@ -464,6 +503,10 @@ class Drive:
         self._check_following_error(dt)
         if self.state == State.FAULT_REACTION_ACTIVE:
             self._set_state(State.FAULT)
+        elif self.state == State.FAULT and self.reset_left is not None and self.reset_left > 0:
+            self.reset_left -= 1               # a slow fault reset, bit 7 still held
+            if self.reset_left == 0:
+                self._leave_fault()
         elif (self.state == State.QUICK_STOP_ACTIVE and abs(self.motor.vel) < 1.0
               and self.read(0x605A) in (1, 2, 3, 4)):
             self._set_state(State.SWITCH_ON_DISABLED)
