@@ -36,7 +36,7 @@ def test_ttc_regression_qtest_passes_on_our_build() -> None:
     assert not re.search(r"^not ok", out, re.M), out
 
 
-ZYNQMP_RPU_CASES = ("por", "hivec-halt", "lovec-tcm-split", "tcm-comb", "reset-restart",
+ZYNQMP_RPU_CASES = ("por", "hivec-halt", "sysreset", "lovec-tcm-split", "tcm-comb", "reset-restart",
                     "gic-banked", "gic-irq", "no-vbar", "unimp-logged", "psci-apu", "psci-rpu",
                     "ipi", "ipi-rpu-irq")
 
