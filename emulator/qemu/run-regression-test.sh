@@ -4,7 +4,7 @@
 # --test zynq-can-test the CAN controllers' (patches/0008,
 # tests/qtest/zynq-can-test.c), or with --test can-lockstep-test the
 # canlink backend's (patches/0010, tests/qtest/can-lockstep-test.c), or with
-# --test xlnx-zynqmp-rpu-test the ZynqMP RPU's (patches/0014-0022,
+# --test xlnx-zynqmp-rpu-test the ZynqMP RPU's (patches/0014-0023,
 # tests/qtest/xlnx-zynqmp-rpu-test.c; it runs on qemu-system-aarch64, the
 # others on qemu-system-arm).
 # Exits 0 when it passes, 1 when it fails,
