@@ -82,7 +82,7 @@ class Board:
 
     @property
     def boot_flow(self) -> str:
-        """How the board starts (qemu.boot): ``stub`` (the Zynq-7000: every
+        """How the board starts (board.yaml: qemu: boot): ``stub`` (the Zynq-7000: every
         CPU in the boot stub, which enters the zImage; the default) or
         ``tf-a`` (the ZynqMP: CPU0 in TF-A's BL31, which enters BL33)."""
         return str(self.qemu.get("boot", "stub"))

@@ -206,15 +206,15 @@ def boot_args(board: Board, images: Images, virtual_time: bool) -> list[str]:
     if board.boot_flow == "tf-a":
         if images.bl31 is None:
             raise QemuError(f"board {board.name} boots through TF-A: the images have no BL31")
-        loads = [
+        tf_a_loads = [
             (images.bl31, board.addr("load", "tf_a")),
             (images.stub, board.addr("load", "bl33")),
             (images.kernel, board.addr("load", "image")),
             (images.dtb, board.addr("load", "dtb")),
             (images.initramfs, board.addr("load", "initramfs")),
         ]
-        for f, a in loads:
-            args += ["-device", f"loader,file={f},addr={a:#x},force-raw=on"]
+        for path, addr in tf_a_loads:
+            args += ["-device", f"loader,file={path},addr={addr:#x},force-raw=on"]
         return args + ["-device", f"loader,addr={board.addr('load', 'tf_a'):#x},cpu-num=0"]
     if board.boot_flow != "stub":
         raise QemuError(f"board {board.name}: unknown boot flow {board.boot_flow!r} (stub, tf-a)")
