@@ -61,7 +61,7 @@ def _symbol_files(cpu: int) -> list[Path]:
 
 
 def symbolise(cpu: int, addr: int, board: Board | None = None) -> str:
-    if board is not None:
+    if board is not None and "boot_stub" in board.data["load"]:
         stub = board.addr("load", "boot_stub")
         if stub <= addr < stub + 0x1000:
             park = board.addr("load", "park_loop")

@@ -95,6 +95,7 @@ def test_linux_dt_matches_board_yaml(board: qemu.Board, images: qemu.Images, var
     assert cells(fdtget(dtb, f"/axi/serial@{u0['base']:x}", "reg"))[0] == u0["base"]
     assert fdtget(dtb, f"/axi/serial@{u0['base']:x}", "interrupts") == [0, 21, 4]
     assert fdtget(dtb, "/psci", "method", "s") == "smc"
+    assert fdtget(dtb, "/timer", "clock-frequency") == [board.qemu["timer_hz"]]
     bootargs = fdtget(dtb, "/chosen", "bootargs", "s")
     assert isinstance(bootargs, str) and "maxcpus=1" in bootargs and f"console={u0['tty']}" in bootargs
     for r5, car in board.data["servo"]["carveouts"].items():
@@ -131,14 +132,23 @@ def test_boot_tf_a_to_linux_shell(board: qemu.Board, images: qemu.Images) -> Non
             assert images.dtb.name == "linux-nopmu.dtb", "without a PMU Linux needs the no-pmu devicetree"
         console.wait_for_line(r"Linux version 6\.12\.\S+ .*PREEMPT_RT", timeout=60, regex=True)
         console.wait_for_line("CPU: All CPU(s) started at EL2", timeout=120)
-        times = qemu.boot_to_shell(m, timeout=300)
+        line = console.wait_for_line(r"servoamp: userspace ready at ([0-9.]+) s", timeout=300, regex=True)
+        guest_userspace = float(line.split()[-2])
         prompt = str(board.data["linux"]["prompt"])
-        rc, out = qemu.run_shell(console, "uname -m; cat /sys/kernel/realtime; grep -c ^processor /proc/cpuinfo",
+        console.wait_for_text(prompt, timeout=60)
+        shell = time.monotonic() - m.started_at
+        rc, out = qemu.run_shell(console, "uname -m; uname -v | grep -o PREEMPT_RT; grep -c ^processor /proc/cpuinfo",
                                  prompt, timeout=60)
         assert rc == 0
-        assert out.split() == ["aarch64", "1", "1"]
-        # TF-A added its own reserved-memory node to the DTB
-        rc, out = qemu.run_shell(console, "ls /proc/device-tree/reserved-memory", prompt, timeout=60)
-        assert rc == 0 and re.search(rf"tf-a@{board.addr('tf_a', 'mem_base'):x}\b", out), out
-        print(f"\n[zynqmp] shell after {times.shell:.1f} s on the host, userspace at {times.guest_userspace:.2f} s "
+        assert out.split() == ["aarch64", "PREEMPT_RT", "1"]
+        # TF-A added its own reserved-memory node ("tf-a") to the DTB: its
+        # base, and its size as TF-A 2.8 computes it (BL31_LIMIT - BL31_BASE,
+        # one byte short of ZYNQMP_ATF_MEM_SIZE)
+        rc, out = qemu.run_shell(console, "od -An -tx1 -v /proc/device-tree/reserved-memory/tf-a/reg", prompt,
+                                 timeout=60)
+        assert rc == 0, out
+        reg = bytes.fromhex("".join(out.split()))
+        base, size = int.from_bytes(reg[:8], "big"), int.from_bytes(reg[8:16], "big")
+        assert (base, size + 1) == (board.addr("tf_a", "mem_base"), board.addr("tf_a", "mem_size"))
+        print(f"\n[zynqmp] shell after {shell:.1f} s on the host, userspace at {guest_userspace:.2f} s "
               f"guest time", file=sys.stderr)
