@@ -52,11 +52,19 @@ class Symbols:
         return f"{self.names[i]}+{addr - self.addrs[i]:#x}"
 
 
-def _symbol_files(cpu: int) -> list[Path]:
+def _vmlinux(board: Board | None) -> Path:
+    """The vmlinux of the board's kernel: its own build (linux.link, the
+    ZynqMP) or the Zynq-7000's variant (kernel_link)."""
+    if board is not None and "link" in board.linux:
+        return REPO / str(board.linux["link"]) / "obj/vmlinux"
+    return kernel_link() / "obj/vmlinux"
+
+
+def _symbol_files(cpu: int, board: Board | None = None) -> list[Path]:
     """Where an address of ``cpu`` may come from: CPU0 runs Linux (vmlinux)
     and servod; CPU1 the servo firmware (its ELF) or the boot stub."""
     if cpu == 0:
-        return [kernel_link() / "obj/vmlinux", REPO / "build/linux/servod/servod"]
+        return [_vmlinux(board), REPO / "build/linux/servod/servod"]
     return sorted((REPO / "build/rpu_app").glob("*/servo.elf"))
 
 
@@ -66,7 +74,7 @@ def symbolise(cpu: int, addr: int, board: Board | None = None) -> str:
         if stub <= addr < stub + 0x1000:
             park = board.addr("load", "park_loop")
             return f"boot stub{' (park loop)' if addr >= park else ''}+{addr - stub:#x}"
-    for f in _symbol_files(cpu):
+    for f in _symbol_files(cpu, board):
         syms = Symbols.of(f)
         hit = syms.lookup(addr) if syms else None
         if hit:
@@ -116,9 +124,10 @@ def vcpu_report(machine: QemuMachine, reason: str) -> str:
                 lines.extend(hits[:40])
         # the kernel's clock as Linux sees it: jiffies stands still across
         # the two snapshots when CPU0's tick no longer arrives
-        vmlinux = kernel_link() / "obj/vmlinux"
+        vmlinux = _vmlinux(machine.board)
         if vmlinux.exists():
-            nm = shutil.which("arm-linux-gnueabihf-nm") or "nm"
+            cross = "aarch64-linux-gnu-nm" if machine.board.arch == "arm64" else "arm-linux-gnueabihf-nm"
+            nm = shutil.which(cross) or "nm"
             res = subprocess.run([nm, str(vmlinux)], text=True, capture_output=True)
             want: dict[str, int | None] = {"jiffies": None}
             for line in res.stdout.splitlines():
