@@ -19,8 +19,8 @@
 # board's BL33 is a stub (boards/zynqmp_qemu/boot) that does what U-Boot
 # would: enter Linux with x0 = the DTB.
 #
-# Source: Debian's `arm-trusted-firmware` source package (the newest the
-# machine's Debian suites serve), fetched with a PRIVATE apt configuration
+# Source: Debian's `arm-trusted-firmware` source package of bookworm (2.8),
+# fetched once with a PRIVATE apt configuration
 # (own deb-src list, state and cache; the mirror URI read from /etc/apt by
 # scripts/lib/debian-mirror.sh, never written here) and unpacked with
 # dpkg-source (Debian's patches applied). Flags as Debian's own rules:
@@ -65,7 +65,8 @@ command -v dpkg-source >/dev/null || die "dpkg-source missing (dpkg-dev): run sc
 t0=$(date +%s.%N)
 elapsed() { echo "$(date +%s.%N) $t0" | awk '{ printf "%.1f", $1 - $2 }'; }
 
-# 1. The source package, fetched once (newest version the suites serve).
+# 1. The source package, fetched once (bookworm's; the newest one cached is
+#    used, and its version and .dsc hash are in the key).
 srcroot=$cache/tf-a-src
 mkdir -p "$srcroot"
 exec 8>"$srcroot/.lock"
