@@ -18,6 +18,9 @@ if TYPE_CHECKING:
     from servoamp.runner import QemuMachine
 
 
+ELF_MACHINE_AARCH64 = 183
+
+
 class Symbols:
     """Address to ``symbol+0xoff`` for an ELF (``nm -n``), loaded once."""
 
@@ -27,7 +30,12 @@ class Symbols:
         self.elf = elf
         self.addrs: list[int] = []
         self.names: list[str] = []
-        nm = shutil.which("arm-linux-gnueabihf-nm") or shutil.which("arm-none-eabi-nm") or "nm"
+        with elf.open("rb") as f:
+            header = f.read(20)
+        if header[:4] == b"\x7fELF" and int.from_bytes(header[18:20], "little") == ELF_MACHINE_AARCH64:
+            nm = shutil.which("aarch64-linux-gnu-nm") or "nm"
+        else:
+            nm = shutil.which("arm-linux-gnueabihf-nm") or shutil.which("arm-none-eabi-nm") or "nm"
         res = subprocess.run([nm, "-n", str(elf)], text=True, capture_output=True)
         for line in res.stdout.splitlines():
             parts = line.split()
@@ -83,6 +91,8 @@ def symbolise(cpu: int, addr: int, board: Board | None = None) -> str:
 
 
 _REG = re.compile(r"R(\d\d)=([0-9a-fA-F]{8})")
+# AArch64 (the ZynqMP's A53s): PC and the link register X30
+_REG64 = re.compile(r"\b(PC|X30)=([0-9a-fA-F]{16})")
 
 
 def vcpu_report(machine: QemuMachine, reason: str) -> str:
@@ -103,6 +113,9 @@ def vcpu_report(machine: QemuMachine, reason: str) -> str:
             for n, name in ((15, "pc"), (14, "lr")):
                 if n in found:
                     lines.append(f"{name} {found[n]:08x} = {symbolise(cpu, found[n], machine.board)}")
+            for reg, value in _REG64.findall(regs):
+                name = "pc" if reg == "PC" else "lr"
+                lines.append(f"{name} {value} = {symbolise(cpu, int(value, 16), machine.board)}")
             # a stack scan: words near SP that point into code, innermost
             # first (a crude backtrace; the monitor reads through this CPU's
             # MMU). MMIO, the GIC's included, is never read from the
