@@ -289,14 +289,18 @@ def build_tf_a(board: Board) -> Path:
 
 
 def build_bl33(board: Board) -> Path:
-    """The BL33 stub (boards/<board>/boot/bl33.S): enters the Image at
-    load.image with x0 = load.dtb."""
+    """The BL33 stub (boards/<board>/boot/bl33.S): releases the RPU's bus
+    and power-gate resets as the FSBL would (fsbl.rst_lpd_top,
+    fsbl.rpu_release), then enters the Image at load.image with x0 =
+    load.dtb."""
     out = board.build_dir
     _run([
         "make", "-s", "-C", board.folder / "boot", f"OUT={out}",
         f"BL33_ADDR={board.addr('load', 'bl33'):#x}",
         f"IMAGE_ADDR={board.addr('load', 'image'):#x}",
         f"DTB_ADDR={board.addr('load', 'dtb'):#x}",
+        f"RST_LPD_TOP={board.addr('fsbl', 'rst_lpd_top'):#x}",
+        f"RPU_RELEASE={board.addr('fsbl', 'rpu_release'):#x}",
     ])
     return out / "bl33.bin"
 
