@@ -34,7 +34,13 @@ apt_host=(build-essential gcc make pkg-config python3-venv git
 	clang libclang-rt-14-dev spin chromium openssl util-linux)
 apt_board=(gcc-arm-linux-gnueabihf binutils-arm-linux-gnueabihf
 	device-tree-compiler linux-source-6.1 bc bison flex libssl-dev
-	libelf-dev cpio xz-utils kmod python3-minimal libc6-dev-armhf-cross)
+	libelf-dev cpio xz-utils kmod python3-minimal libc6-dev-armhf-cross
+	gcc-aarch64-linux-gnu binutils-aarch64-linux-gnu libc6-dev-arm64-cross
+	linux-source-6.12 dpkg-dev)
+# From bookworm-backports: Debian's qemu-system-aarch64 (10.0.2) for the
+# ZynqMP board (boards/zynqmp_qemu) until emulator/qemu/build.sh builds the
+# aarch64 target; python/servoamp/runner.py prefers our build when it has one.
+apt_board_bpo=(qemu-system-arm)
 
 missing=()
 want=("${apt_host[@]}")
@@ -42,6 +48,12 @@ want=("${apt_host[@]}")
 for p in "${want[@]}"; do
 	dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p")
 done
+missing_bpo=()
+if [ "$scope" != host ]; then
+	for p in "${apt_board_bpo[@]}"; do
+		dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing_bpo+=("$p")
+	done
+fi
 
 # bookworm-backports (meson >= 1.5 for our QEMU build): the system's sources
 # get one list file with the machine's own mirror.
@@ -49,7 +61,7 @@ bpo_list=/etc/apt/sources.list.d/servoamp-backports.list
 need_bpo=0
 [ "$scope" = host ] || [ -f "$bpo_list" ] || need_bpo=1
 
-if [ ${#missing[@]} -gt 0 ] || [ $need_bpo -eq 1 ]; then
+if [ ${#missing[@]} -gt 0 ] || [ ${#missing_bpo[@]} -gt 0 ] || [ $need_bpo -eq 1 ]; then
 	if [ $need_bpo -eq 1 ]; then
 		mirror=$(debian_mirror)
 		log "adding bookworm-backports from $bpo_list"
@@ -60,6 +72,11 @@ if [ ${#missing[@]} -gt 0 ] || [ $need_bpo -eq 1 ]; then
 	if [ ${#missing[@]} -gt 0 ]; then
 		log "installing: ${missing[*]}"
 		quiet $sudo_cmd env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
+	fi
+	if [ ${#missing_bpo[@]} -gt 0 ]; then
+		log "installing from bookworm-backports: ${missing_bpo[*]}"
+		quiet $sudo_cmd env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends \
+			-t bookworm-backports "${missing_bpo[@]}"
 	fi
 fi
 

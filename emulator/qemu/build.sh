@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Build servoamp's own qemu-system-arm 10.0.2 (Debian's source, with the
-# patches in patches/: a Cadence TTC fix so the Zynq-7000 board runs under
-# -icount without livelocking, and the other fixes and features README.md
-# lists, with their qtests).
+# Build servoamp's own qemu-system-arm and qemu-system-aarch64 10.0.2
+# (Debian's source, with the patches in patches/: a Cadence TTC fix so the
+# Zynq-7000 board runs under -icount without livelocking, the ZynqMP's RPU,
+# and the other fixes and features README.md lists, with their qtests).
+# qemu-system-arm runs the Zynq-7000 (xilinx-zynq-a9), qemu-system-aarch64
+# the ZynqMP (xlnx-zcu102) and the Zynq-7000 as well.
 #
 #   emulator/qemu/build.sh            # build or reuse the cached QEMU
 #   emulator/qemu/build.sh --print    # same, then print the install directory
@@ -21,7 +23,9 @@
 #   qemu-src/qemu_10.0.2+ds.orig.tar.xz   downloaded once (shared)
 #   qemu-src/apt/                         the private APT state
 #   qemu/<key>/bin/qemu-system-arm        the install (prefix)
-#   qemu/<key>/libexec/servoamp/          the qtest binaries (TTC, CAN, canlink)
+#   qemu/<key>/bin/qemu-system-aarch64
+#   qemu/<key>/libexec/servoamp/          the qtest binaries (TTC, CAN, canlink,
+#                                         ZynqMP RPU)
 #   qemu/<key>/info, build.log, ok        results (ok = complete, the
 #                                         qtests passed)
 #   qemu/<key>/src, build                 patched source and build tree, removed
@@ -55,7 +59,7 @@ python=/usr/bin/python3
 
 # configure options (the prefix is added below; it depends on the key)
 config_opts=(
-	--target-list=arm-softmmu
+	--target-list=arm-softmmu,aarch64-softmmu
 	--python=$python
 	--disable-download
 	--without-default-features
@@ -69,9 +73,10 @@ config_opts=(
 	--disable-guest-agent
 	--disable-user
 )
-# ninja targets: the emulator, what `meson install` needs, our qtests
-qtests=(cadence-ttc-test zynq-can-test can-lockstep-test)
-targets=(qemu-system-arm trace/trace-events-all "${qtests[@]/#/tests/qtest/}")
+# ninja targets: the emulators, what `meson install` needs, our qtests
+# (run-regression-test.sh knows which emulator each qtest runs on)
+qtests=(cadence-ttc-test zynq-can-test can-lockstep-test xlnx-zynqmp-rpu-test)
+targets=(qemu-system-arm qemu-system-aarch64 trace/trace-events-all "${qtests[@]/#/tests/qtest/}")
 
 log() { printf '[qemu] %s\n' "$*" >&2; }
 die() { printf '[qemu] error: %s\n' "$*" >&2; exit 1; }
@@ -80,7 +85,7 @@ t0=$(date +%s.%N)
 elapsed() { echo "$(date +%s.%N) $t0" | awk '{ printf "%.1f", $1 - $2 }'; }
 
 # 1. Build dependencies (Debian packages; the -dev packages also bring the
-#    libraries qemu-system-arm runs with), installed only when missing.
+#    libraries the emulators run with), installed only when missing.
 need_pkgs=(gcc pkg-config ninja-build python3-venv libglib2.0-dev
 	libpixman-1-dev libslirp-dev zlib1g-dev libfdt-dev xz-utils bzip2 patch)
 installed() { [ "$(dpkg-query -W -f='${db:Status-Status}' "$1" 2>/dev/null)" = installed ]; }
@@ -185,7 +190,7 @@ prepare_tree() {
 	# QEMU's meson.build lists the edk2 images as inputs of build targets
 	# whenever bzip2 is installed and an edk2 target (arm-softmmu is one)
 	# is configured: give it empty compressed stand-ins. They are never
-	# installed (--disable-install-blobs); this board needs no firmware.
+	# installed (--disable-install-blobs); these boards need no firmware.
 	local f
 	for f in $(sed -n "s/^ *'\(edk2-[^']*\.fd\)',\$/\1/p" "$out/src/pc-bios/meson.build"); do
 		[ -e "$out/src/pc-bios/$f.bz2" ] || bzip2 -c </dev/null >"$out/src/pc-bios/$f.bz2"
@@ -230,9 +235,14 @@ printf '== meson install\n' >>"$buildlog"
 for t in "${qtests[@]}"; do
 	install -D -m 0755 "$out/build/tests/qtest/$t" "$out/libexec/servoamp/$t"
 done
-"$out/bin/qemu-system-arm" --version | head -1 | grep -q "version $version" ||
-	die "$out/bin/qemu-system-arm does not run"
-"$out/bin/qemu-system-arm" -M none -netdev help | grep -qx user || die "qemu-system-arm was built without slirp (user networking)"
+for arch in arm aarch64; do
+	"$out/bin/qemu-system-$arch" --version | head -1 | grep -q "version $version" ||
+		die "$out/bin/qemu-system-$arch does not run"
+	"$out/bin/qemu-system-$arch" -M none -netdev help | grep -qx user ||
+		die "qemu-system-$arch was built without slirp (user networking)"
+done
+"$out/bin/qemu-system-aarch64" -M help | grep -q '^xlnx-zcu102 ' || die "qemu-system-aarch64 has no xlnx-zcu102"
+"$out/bin/qemu-system-aarch64" -M help | grep -q '^xilinx-zynq-a9 ' || die "qemu-system-aarch64 has no xilinx-zynq-a9"
 for t in "${qtests[@]}"; do
 	log "running the qtest $t (run-regression-test.sh --test $t)"
 	printf '== run-regression-test.sh --test %s\n' "$t" >>"$buildlog"
@@ -266,5 +276,5 @@ touch "$out/ok"
 ls -td "$cache"/qemu/*/ | tail -n +$((${SERVOAMP_KEEP:-2} + 1)) | while read -r d; do
 	[ "${d%/}" = "$out" ] || rm -rf "${d%/}"
 done
-log "built in $secs s: $out/bin/qemu-system-arm (disk: source $du_src MB, build $du_build MB, install $((du_total - du_src - du_build)) MB)"
+log "built in $secs s: $out/bin/qemu-system-arm, qemu-system-aarch64 (disk: source $du_src MB, build $du_build MB, install $((du_total - du_src - du_build)) MB)"
 publish

@@ -3,7 +3,10 @@
 # (patches/0002, tests/qtest/cadence-ttc-test.c) by default, or with
 # --test zynq-can-test the CAN controllers' (patches/0008,
 # tests/qtest/zynq-can-test.c), or with --test can-lockstep-test the
-# canlink backend's (patches/0010, tests/qtest/can-lockstep-test.c).
+# canlink backend's (patches/0010, tests/qtest/can-lockstep-test.c), or with
+# --test xlnx-zynqmp-rpu-test the ZynqMP RPU's (patches/0014-0023,
+# tests/qtest/xlnx-zynqmp-rpu-test.c; it runs on qemu-system-aarch64, the
+# others on qemu-system-arm).
 # Exits 0 when it passes, 1 when it fails,
 # 124 when it times out (the unpatched TTC model livelocks in clock_step, so
 # a hang is the expected failure there).
@@ -12,10 +15,11 @@
 #   emulator/qemu/run-regression-test.sh DIR              # an install dir (bin/, libexec/servoamp/)
 #                                                         # or a QEMU build dir (SERVOAMP_QEMU_KEEP_BUILD=1)
 #   emulator/qemu/run-regression-test.sh DIR --qemu BIN   # DIR's test binary against another
-#                                                         # qemu-system-arm, e.g. Debian's unpatched
+#                                                         # QEMU, e.g. Debian's unpatched
 #                                                         # /usr/bin/qemu-system-arm (same 10.0.2)
 #   emulator/qemu/run-regression-test.sh [DIR] --test zynq-can-test
 #   emulator/qemu/run-regression-test.sh [DIR] --test can-lockstep-test
+#   emulator/qemu/run-regression-test.sh [DIR] --test xlnx-zynqmp-rpu-test
 #
 # Environment: SERVOAMP_QEMU_TEST_TIMEOUT (seconds, default 60; the test takes
 # about 2 s on a fixed QEMU).
@@ -30,7 +34,7 @@ while [ $# -gt 0 ]; do
 	case $1 in
 	--qemu) qemu=${2:?--qemu needs a path}; shift 2 ;;
 	--test) test=${2:?--test needs a name}; shift 2 ;;
-	-h | --help) sed -n '2,22p' "$0"; exit 0 ;;
+	-h | --help) sed -n '2,26p' "$0"; exit 0 ;;
 	*) [ -z "$dir" ] || die "one directory only"; dir=$1; shift ;;
 	esac
 done
@@ -39,18 +43,23 @@ dir=$(cd "$dir" && pwd)
 
 test_bin=""
 case $test in
-*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test, can-lockstep-test)" ;;
+*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test, can-lockstep-test, xlnx-zynqmp-rpu-test)" ;;
+esac
+# the emulator a qtest runs on: the ZynqMP's need qemu-system-aarch64
+case $test in
+xlnx-zynqmp-*) emu=qemu-system-aarch64 ;;
+*) emu=qemu-system-arm ;;
 esac
 for t in "$dir/libexec/servoamp/$test" "$dir/tests/qtest/$test"; do
 	[ -x "$t" ] && { test_bin=$t; break; }
 done
 [ -n "$test_bin" ] || die "no $test in $dir (libexec/servoamp/ or tests/qtest/)"
 if [ -z "$qemu" ]; then
-	for q in "$dir/bin/qemu-system-arm" "$dir/qemu-system-arm"; do
+	for q in "$dir/bin/$emu" "$dir/$emu"; do
 		[ -x "$q" ] && { qemu=$q; break; }
 	done
 fi
-[ -n "$qemu" ] && [ -x "$qemu" ] || die "no qemu-system-arm in $dir (give one with --qemu)"
+[ -n "$qemu" ] && [ -x "$qemu" ] || die "no $emu in $dir (give one with --qemu)"
 
 limit=${SERVOAMP_QEMU_TEST_TIMEOUT:-60}
 out=$(mktemp)

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# Build the servoamp initramfs (gzip'ed newc cpio) for the Zynq-7000 guest.
+# Build the servoamp initramfs (gzip'ed newc cpio) for a guest: the
+# Zynq-7000's (armhf, the default) or the ZynqMP's (--arch arm64).
 #
-#   linux/initramfs/build.sh [--module KO]... [--firmware FILE]... [--bin FILE]... [--print]
+#   linux/initramfs/build.sh [--arch armhf|arm64] [--module KO]... [--firmware FILE]... [--bin FILE]... [--print]
 #
-# Contents: Debian's busybox-static:armhf as the whole userland, /init
+# Contents: Debian's busybox-static:<arch> as the whole userland, /init
 # (init.sh: mounts proc, sys, devtmpfs, debugfs, loads the modules,
 # runs a shell on the console ttyPS0), /usr/sbin/irqprio (irqprio.c: the
 # SCHED_FIFO priority of an interrupt's thread under PREEMPT_RT, run by /init
@@ -12,11 +13,12 @@
 # the recording tests before servod), every module given with --module (the
 # remoteproc driver, the cycle interrupt's UIO driver) in /lib/modules/,
 # every --firmware file in /lib/firmware/ (same name), and
-# every --bin file (static armhf programs: servod, ampctl) in /usr/bin/, and
+# every --bin file (static programs of the guest's arch: servod, ampctl)
+# in /usr/bin/, and
 # the G-code examples of the repository (examples/*.nc) in
 # /usr/share/servoamp/examples/ (`ampctl run /usr/share/servoamp/examples/...`).
 #
-# busybox-static:armhf comes from the machine's own Debian mirror through a
+# busybox-static:<arch> comes from the machine's own Debian mirror through a
 # PRIVATE apt configuration (own sources list, state and cache directories;
 # never `dpkg --add-architecture`). The mirror URI is read from
 # /etc/apt/sources.list.d/*.sources, so no host name is written anywhere in
@@ -25,8 +27,9 @@
 # The archive is built with the kernel's own gen_init_cpio (no root needed
 # for /dev/console) and cached under
 # ${SERVOAMP_CACHE:-$HOME/.cache/servoamp}/initramfs/<key>/ where key hashes
-# every input (busybox .deb, init.sh, this script, modules, firmware files).
-# build/initramfs.cpio.gz links to the current one.
+# every input (arch, busybox .deb, init.sh, this script, modules, firmware
+# files). build/initramfs.cpio.gz (armhf) or build/initramfs-arm64.cpio.gz
+# links to the current one.
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")" && pwd)
@@ -36,6 +39,7 @@ modules=()
 firmware=()
 bins=()
 print=0
+arch=armhf
 
 log() { printf '[initramfs] %s\n' "$*" >&2; }
 die() { printf '[initramfs] error: %s\n' "$*" >&2; exit 1; }
@@ -46,45 +50,55 @@ while [ $# -gt 0 ]; do
 	--firmware) firmware+=("$(realpath "$2")"); shift 2 ;;
 	--bin) bins+=("$(realpath "$2")"); shift 2 ;;
 	--print) print=1; shift ;;
+	--arch) arch=$2; shift 2 ;;
 	*) die "unknown argument: $1" ;;
 	esac
 done
+# the guest's C compiler (irqprio) and where the image is linked from build/
+case $arch in
+armhf) cc=arm-linux-gnueabihf-gcc; link=initramfs.cpio.gz ;;
+arm64) cc=aarch64-linux-gnu-gcc; link=initramfs-arm64.cpio.gz ;;
+*) die "unknown --arch '$arch' (armhf, arm64)" ;;
+esac
+command -v "$cc" >/dev/null || die "$cc missing: run scripts/bootstrap.sh"
 for f in "${modules[@]}"; do [ -f "$f" ] || die "module $f not found"; done
 for f in "${firmware[@]}"; do [ -f "$f" ] || die "firmware $f not found"; done
 for f in "${bins[@]}"; do [ -f "$f" ] || die "program $f not found"; done
 examples=()
 for f in "$repo"/examples/*.nc; do [ -f "$f" ] && examples+=("$f"); done
 
-# the kernel's host tool: the same program in every kernel variant's tree
+# the kernel's host tool: the same program in every kernel's tree (either
+# board's)
 gen_init_cpio=""
-for k in kernel kernel-rt; do
+for k in kernel kernel-rt kernel-zynqmp; do
 	[ -x "$repo/build/$k/obj/usr/gen_init_cpio" ] && { gen_init_cpio=$repo/build/$k/obj/usr/gen_init_cpio; break; }
 done
 [ -n "$gen_init_cpio" ] || die "build/kernel/obj/usr/gen_init_cpio missing: run linux/kernel/build.sh first"
 
 . "$repo/scripts/lib/debian-mirror.sh"
 
-# 1. busybox-static:armhf, downloaded once.
+# 1. busybox-static:<arch>, downloaded once per arch.
 bbdir=$cache/initramfs/busybox
 mkdir -p "$bbdir"
 exec 9>"$bbdir/.lock"
 flock 9
-deb=$(ls "$bbdir"/busybox-static_*_armhf.deb 2>/dev/null | tail -1 || true)
+deb=$(ls "$bbdir"/busybox-static_*_"$arch".deb 2>/dev/null | tail -1 || true)
 if [ -z "$deb" ]; then
-	apt_root=$bbdir/apt
-	private_apt_setup "$apt_root" -o "APT::Architecture=armhf" -o "APT::Architectures::=armhf"
+	apt_root=$bbdir/apt-$arch
+	private_apt_setup "$apt_root" -o "APT::Architecture=$arch" -o "APT::Architectures::=$arch"
 	mirror=$(debian_mirror) || die "cannot find the Debian mirror in /etc/apt"
-	echo "deb [arch=armhf] $mirror bookworm main" >"$apt_root/etc/sources.list"
-	log "downloading busybox-static:armhf with a private apt configuration"
+	echo "deb [arch=$arch] $mirror bookworm main" >"$apt_root/etc/sources.list"
+	log "downloading busybox-static:$arch with a private apt configuration"
 	apt-get "${PRIVATE_APT_OPTS[@]}" -qq update
-	(cd "$bbdir" && apt-get "${PRIVATE_APT_OPTS[@]}" -qq download busybox-static:armhf)
-	deb=$(ls "$bbdir"/busybox-static_*_armhf.deb | tail -1)
+	(cd "$bbdir" && apt-get "${PRIVATE_APT_OPTS[@]}" -qq download "busybox-static:$arch")
+	deb=$(ls "$bbdir"/busybox-static_*_"$arch".deb | tail -1)
 	rm -rf "$apt_root"
 fi
 flock -u 9
 
 # 2. Cache key over every input.
 key=$({
+	printf 'arch %s\n' "$arch"
 	sha256sum "$deb" "$here/init.sh" "$here/net-up.sh" "$here/irqprio.c" "$0" | cut -d' ' -f1
 	for f in "${modules[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
 	for f in "${firmware[@]}"; do printf '%s %s\n' "$(sha256sum <"$f")" "$(basename "$f")"; done
@@ -96,7 +110,7 @@ image=$out/initramfs.cpio.gz
 
 publish() {
 	mkdir -p "$repo/build"
-	ln -sfn "$image" "$repo/build/initramfs.cpio.gz"
+	ln -sfn "$image" "$repo/build/$link"
 	[ $print -eq 0 ] || printf '%s\n' "$image"
 	return 0
 }
@@ -114,8 +128,8 @@ dpkg-deb -x "$deb" "$stage/deb"
 bb=$stage/deb/bin/busybox
 [ -f "$bb" ] || die "no bin/busybox in $deb"
 # irqprio (the interrupt thread's priority under PREEMPT_RT; busybox has no
-# chrt), a static armhf program like servod
-arm-linux-gnueabihf-gcc -static -O2 -Wall -Wextra -Werror -o "$stage/irqprio" "$here/irqprio.c" ||
+# chrt), a static program like servod
+"$cc" -static -O2 -Wall -Wextra -Werror -o "$stage/irqprio" "$here/irqprio.c" ||
 	die "irqprio.c does not build"
 list=$stage/list
 {

@@ -27,7 +27,11 @@ done
 # (docs/cycle.md, "Priorities under PREEMPT_RT"). Linux runs on CPU0 only
 # (maxcpus=1). On the vanilla kernel that thread exists but never runs (the
 # hard interrupt wakes servod): its priority does not matter there.
-irqprio cycle-interrupt 81 || echo "servoamp: irqprio cycle-interrupt failed"
+# Only where the cycle interrupt's driver is in the initramfs (not yet on
+# the ZynqMP board).
+if [ -e /lib/modules/servoamp_cycle_uio.ko ]; then
+	irqprio cycle-interrupt 81 || echo "servoamp: irqprio cycle-interrupt failed"
+fi
 
 # PREEMPT_RT prints kernel messages to the console from a kthread, after
 # the fact: a line such as remoteproc's "crash detected" then lands in the
@@ -35,7 +39,9 @@ irqprio cycle-interrupt 81 || echo "servoamp: irqprio cycle-interrupt failed"
 # the caller's context, before the shell answers). Keep only emergencies
 # and alerts (soft lockups, workqueue lockups: the stall detectors) on the
 # console there; everything stays in dmesg.
-if [ "$(cat /sys/kernel/realtime 2>/dev/null)" = 1 ]; then
+# (/sys/kernel/realtime comes with the RT patch series of the Zynq-7000's
+# 6.1; mainline PREEMPT_RT, the ZynqMP's 6.12, says it in uname -v.)
+if [ "$(cat /sys/kernel/realtime 2>/dev/null)" = 1 ] || uname -v | grep -q PREEMPT_RT; then
 	dmesg -n 3
 	echo "servoamp: PREEMPT_RT: console loglevel 3 (dmesg has every message)"
 fi

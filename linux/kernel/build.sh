@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Build the servoamp Linux kernel for the Zynq-7000 (zImage + the prepared
 # build tree that the out-of-tree remoteproc module is compiled against).
+# The ZynqMP's kernel (arm64, 6.12) is build-zynqmp.sh's, in a cache of its
+# own.
 #
 #   linux/kernel/build.sh                    # build or reuse the cached board kernel (rt)
 #   linux/kernel/build.sh --print            # same, then print the kernel directory

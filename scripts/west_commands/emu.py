@@ -7,6 +7,7 @@
     west emu --kernel rt             # boot the PREEMPT_RT kernel (build.sh --variant rt)
     west emu --net                   # with guest networking (eth0 up, servod's
                                      # telemetry port forwarded to 127.0.0.1)
+    west emu -b zynqmp_qemu          # the ZynqMP: TF-A, then Linux 6.12 arm64 on one A53
 
 What it builds (each step is cached and costs about a second when nothing
 changed): the kernel (linux/kernel/build.sh: the PREEMPT_RT kernel, cached
@@ -105,8 +106,9 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     images = qemu.prepare_images(board, args.firmware, with_rpu_app=not args.no_rpu_app)
     print(f"[emu] images ready in {time.monotonic() - t0:.1f} s")
-    for name in ("stub", "zimage", "dtb", "initramfs"):
-        print(f"[emu]   {name:9} {getattr(images, name)}")
+    for name in ("bl31", "stub", "zimage", "dtb", "initramfs"):
+        if getattr(images, name) is not None:
+            print(f"[emu]   {name:9} {getattr(images, name)}")
     print(f"[emu]   firmware  {' '.join(p.name for p in images.firmware) or '-'}")
     if args.build_only:
         return 0

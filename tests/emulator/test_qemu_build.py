@@ -36,6 +36,26 @@ def test_ttc_regression_qtest_passes_on_our_build() -> None:
     assert not re.search(r"^not ok", out, re.M), out
 
 
+ZYNQMP_RPU_CASES = ("por", "hivec-halt", "sysreset", "lovec-tcm-split", "tcm-comb", "reset-restart",
+                    "gic-banked", "gic-irq", "no-vbar", "unimp-logged", "psci-apu", "psci-rpu",
+                    "ipi", "ipi-rpu-irq", "pmu-api", "pmu-r5")
+
+
+def test_zynqmp_rpu_qtest_passes_on_our_build() -> None:
+    """Patches 0014-0023: the ZynqMP's R5s released and held through CRL_APB and
+    the RPU control registers, their TCMs, the RPU's GIC, no VBAR, no PSCI side
+    door, unmodelled blocks logged, the IPI agents, the PMU firmware stand-in
+    (qemu-system-aarch64)."""
+    res = subprocess.run([str(REPO / "emulator/qemu/run-regression-test.sh"), str(qemu.project_qemu()),
+                          "--test", "xlnx-zynqmp-rpu-test"], text=True, capture_output=True, timeout=300)
+    out = res.stdout + res.stderr
+    assert res.returncode == 0, out
+    assert "qemu-system-aarch64" in out, out
+    for case in ZYNQMP_RPU_CASES:
+        assert re.search(rf"^ok \d+ .*/xlnx-zynqmp-rpu/{case}$", out, re.M), (case, out)
+    assert not re.search(r"^not ok", out, re.M), out
+
+
 @pytest.mark.parametrize("patch", PATCHES, ids=[p.name[:4] for p in PATCHES])
 def test_patch_is_in_format_patch_form(patch: Path) -> None:
     text = patch.read_text()
