@@ -106,6 +106,32 @@ static int rs_powered(const char *rs)
 	return rs_is(rs, "running") || rs_is(rs, "crashed") || rs_is(rs, "attached");
 }
 
+/* The servo's line read into pi: 1 if it says STOPPING in this region's
+ * epoch (the firmware saw remoteproc's stop, docs/cycle.md "An operator's
+ * stop"). */
+static int servo_says_stopping(const struct servod *sd, struct amp_peer_info *pi)
+{
+	*pi = (struct amp_peer_info){ 0 };
+	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, pi);
+	return pi->epoch == sd->amp.epoch && pi->state == AMP_SSTATE_STOPPING;
+}
+
+/* servod is not stopping or starting the firmware itself: a stop seen now
+ * is someone else's (no restart, or one waiting for its attach). */
+static int own_restart_idle(const struct recovery *r)
+{
+	return r->phase == RESTART_NONE || r->phase == RESTART_ATTACH;
+}
+
+/* A recovery over (the servo back, or stopped on request). */
+static void recovery_over(struct recovery *r)
+{
+	r->phase = RESTART_NONE;
+	r->failed = 0;
+	r->restart = 0;
+	r->by_reset = 0;
+}
+
 /* ms as seconds for a log line: "60 s", "0.25 s" */
 static const char *secs(char *buf, size_t n, uint64_t ms)
 {
@@ -270,7 +296,7 @@ static void restart_failed(struct servod *sd, const char *rs, const char *fmt, .
 }
 
 /*
- * A stop on request, not a crash (docs/cycle.md, "Stop and recovery"):
+ * A stop on request, not a crash (docs/cycle.md, "An operator's stop"):
  * the firmware's state word says STOPPING (it writes that when it sees
  * remoteproc's stop, before its heartbeat ends), or remoteproc, read
  * again now, says "offline" (a driver that powers the core down without
@@ -283,8 +309,7 @@ static int stopped_on_request(struct servod *sd, const char **rs, char *what, si
 	struct amp_peer_info pi = { 0 };
 
 	*rs = rproc_state(&sd->rproc);
-	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
-	if (pi.epoch == sd->amp.epoch && pi.state == AMP_SSTATE_STOPPING) {
+	if (servo_says_stopping(sd, &pi)) {
 		snprintf(what, n, "the firmware says it is stopping on request (remoteproc: %s)", *rs);
 		return 1;
 	}
@@ -322,8 +347,7 @@ static void report_stall(struct servod *sd, int why, const char *rs)
 	}
 	/* remoteproc and the firmware asked again before anything is
 	 * reported (not while servod's own restart stops and starts it) */
-	if ((sd->recovery.phase == RESTART_NONE || sd->recovery.phase == RESTART_ATTACH) &&
-	    stopped_on_request(sd, &rs, what, sizeof(what))) {
+	if (own_restart_idle(&sd->recovery) && stopped_on_request(sd, &rs, what, sizeof(what))) {
 		logm(sd, "%s, but %s: not a crash, not restarted", cause, what);
 		return;
 	}
@@ -360,27 +384,21 @@ static void report_stall(struct servod *sd, int why, const char *rs)
 static int stopped_while_recovering(struct servod *sd, const char *rs)
 {
 	struct recovery *r = &sd->recovery;
-
 	struct amp_peer_info pi = { 0 };
 
 	if (!rs_is(rs, "offline"))
 		return 0;
-	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
 	/* awaited: the restarted firmware attached (another attach than the
 	 * one servod stopped) and said it stops on request; without that
 	 * word (stopped before its attach, or a driver that powers it down
 	 * unasked) "offline" is a failed restart, retried */
-	if (r->phase == RESTART_ATTACH &&
-	    !(pi.epoch == sd->amp.epoch && pi.state == AMP_SSTATE_STOPPING && pi.attach_count != r->stopped_attach))
+	if (r->phase == RESTART_ATTACH && !(servo_says_stopping(sd, &pi) && pi.attach_count != r->stopped_attach))
 		return 0;
 	if (r->phase != RESTART_ATTACH && !(r->phase == RESTART_BACKOFF && r->backoff_powered))
 		return 0;
 	logm(sd, "servo stopped through remoteproc during recovery (restart %u, %s): recovery abandoned, "
 		 "not restarted", r->restart, recovery_phase_name(r->phase));
-	r->phase = RESTART_NONE;
-	r->failed = 0;
-	r->restart = 0;
-	r->by_reset = 0;
+	recovery_over(r);
 	event_locked(sd, SEV_STOPPED);
 	return 1;
 }
@@ -499,10 +517,7 @@ static void restore(struct servod *sd, uint32_t attach_count)
 		else
 			logm(sd, "recovery complete (restart %u%s)", r->restart,
 			     r->restart > 1 ? ", after retries" : "");
-		r->phase = RESTART_NONE;
-		r->failed = 0;
-		r->restart = 0;
-		r->by_reset = 0;
+		recovery_over(r);
 	}
 	logm(sd, "servo attached (epoch %u, attach_count %u): parameter set loaded", ss->epoch, attach_count);
 }
@@ -526,11 +541,10 @@ void supervise(struct servod *sd)
 	if (!strcmp(rs, "running"))
 		event_locked(sd, SEV_SEEN_RUNNING);
 	if (!strcmp(rs, "offline") && ss->state == SESSION_RUNNING) {
-		(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
+		int stopping = servo_says_stopping(sd, &pi);
+
 		event_locked(sd, SEV_SEEN_OFFLINE);
-		logm(sd, "servo went offline%s", pi.epoch == ss->epoch && pi.state == AMP_SSTATE_STOPPING
-							   ? " (stopped on request: its last state word is STOPPING)"
-							   : "");
+		logm(sd, "servo went offline%s", stopping ? " (stopped on request: its last state word is STOPPING)" : "");
 		return;
 	}
 	why = atomic_exchange(&ss->stall_pending, 0);
@@ -549,7 +563,7 @@ void supervise(struct servod *sd)
 	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
 	pthread_mutex_unlock(&sd->lock);
 	if (peer == AMP_E_PEER_STOPPING && sd->recovery.stopping_logged != pi.attach_count + 1u &&
-	    (sd->recovery.phase == RESTART_NONE || sd->recovery.phase == RESTART_ATTACH)) {
+	    own_restart_idle(&sd->recovery)) {
 		sd->recovery.stopping_logged = pi.attach_count + 1u;
 		logm(sd, "servo stopping on request (its state word says STOPPING, remoteproc: %s): not a stall, "
 			 "not restarted", rs);
