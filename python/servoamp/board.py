@@ -75,6 +75,12 @@ class Board:
         return lx
 
     @property
+    def servo(self) -> dict[str, Any]:
+        sv = self.data.get("servo", {})
+        assert isinstance(sv, dict)
+        return sv
+
+    @property
     def arch(self) -> str:
         """Linux's architecture in the kernel's terms: ``arm`` (the
         Zynq-7000's A9, the default) or ``arm64`` (the ZynqMP's A53)."""

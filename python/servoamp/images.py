@@ -156,11 +156,26 @@ def build_modules(kdir: Path) -> list[Path]:
     return out
 
 
-def build_test_firmware() -> list[Path]:
-    """The test firmware of tests/robot/fixtures (good and bad images)."""
-    out = REPO / "build/tests/fixtures"
-    _run(["make", "-s", "-C", REPO / "tests/robot/fixtures", f"OUT={out}"])
-    return sorted(out.glob("*.elf"))
+def build_test_firmware(board: Board | None = None) -> list[Path]:
+    """The board's test firmware (good and bad images): board.yaml's
+    ``test_firmware`` (a fixtures folder with a Makefile, and make variables
+    taken from the board file by key path); tests/robot/fixtures when the
+    board names none. The board's ``servo.default_firmware`` image is staged
+    a second time under the name the remoteproc driver loads by default."""
+    spec: dict[str, Any] = dict(board.data.get("test_firmware", {})) if board else {}
+    src = REPO / str(spec.get("dir", "tests/robot/fixtures"))
+    out = REPO / "build/tests/fixtures" / (board.name if board and spec else "")
+    make_vars = [f"{k}={board.addr(*str(path).split('.')):#x}"
+                 for k, path in dict(spec.get("vars", {})).items()] if board else []
+    _run(["make", "-s", "-C", src, f"OUT={out}", *make_vars])
+    images = sorted(out.glob("*.elf"))
+    default = board.servo.get("default_firmware") if board else None
+    if default:
+        staged = out / "default" / str(default["name"])
+        staged.parent.mkdir(exist_ok=True)
+        shutil.copyfile(out / str(default["image"]), staged)
+        images.append(staged)
+    return images
 
 
 # rpu_app's outputs (rpu_app/Makefile) and the names they get in the guest's
@@ -229,12 +244,13 @@ def prepare_images(
 ) -> Images:
     """Build (or take from the caches) every image of a boot.
 
-    ``firmware``: ELF files for /lib/firmware; default: the test fixtures
-    plus rpu_app's ELF(s) when they exist (on the Zynq-7000; none yet on
-    the ZynqMP). ``dts_variant``: see :meth:`Board.dts`.
+    ``firmware``: ELF files for /lib/firmware; default: the board's test
+    fixtures (:func:`build_test_firmware`) plus rpu_app's ELF(s) when they
+    exist (on the Zynq-7000; none yet on the ZynqMP). ``dts_variant``: see :meth:`Board.dts`.
     """
     if board.boot_flow == "tf-a":
-        return prepare_tf_a_images(board, firmware or (), dts_variant)
+        return prepare_tf_a_images(board, build_test_firmware(board) if firmware is None else firmware,
+                                   dts_variant)
     kdir = kernel_dir()
     modules = build_modules(kdir)
     if firmware is None:

@@ -27,3 +27,13 @@ def images(board: qemu.Board) -> qemu.Images:
     imgs = qemu.prepare_images(board)
     print(f"\n[board] images ready in {time.monotonic() - t0:.1f} s", file=sys.stderr)
     return imgs
+
+
+@pytest.fixture(scope="session")
+def zynqmp_images() -> qemu.Images:
+    """The zynqmp_qemu board's images (TF-A, BL33 stub, the arm64 RT kernel,
+    initramfs with the R5 test firmware, DTB), built or cached once."""
+    t0 = time.monotonic()
+    imgs = qemu.prepare_images(qemu.Board.load("zynqmp_qemu"))
+    print(f"\n[zynqmp] images ready in {time.monotonic() - t0:.1f} s", file=sys.stderr)
+    return imgs

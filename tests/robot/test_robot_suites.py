@@ -1,5 +1,7 @@
-"""Run each Robot Framework suite of tests/robot on the emulated board (one
-QEMU boot per suite) and require it to pass. Reports: build/robot/<suite>/."""
+"""Run each Robot Framework suite on its emulated board (one QEMU boot per
+suite) and require it to pass: tests/robot/*.robot on zynq7000_qemu,
+tests/robot/zynqmp/*.robot on zynqmp_qemu. Reports:
+build/robot/<suite>/ (zynqmp_<suite>/ for the ZynqMP's)."""
 
 from __future__ import annotations
 
@@ -12,13 +14,19 @@ import pytest
 from servoamp import qemu
 
 REPO = Path(__file__).resolve().parents[2]
-SUITES = sorted((REPO / "tests" / "robot").glob("[0-9][0-9]_*.robot"))
+ROBOT = REPO / "tests" / "robot"
+# (suite, the board it runs on, its report folder under build/robot)
+SUITES = [(s, "zynq7000_qemu", s.stem) for s in sorted(ROBOT.glob("[0-9][0-9]_*.robot"))] + \
+    [(s, "zynqmp_qemu", "zynqmp_" + s.stem) for s in sorted((ROBOT / "zynqmp").glob("[0-9][0-9]_*.robot"))]
 
 
 @pytest.mark.board
-@pytest.mark.parametrize("suite", SUITES, ids=[s.stem for s in SUITES])
-def test_robot_suite(suite: Path, images: qemu.Images) -> None:
-    out = REPO / "build" / "robot" / suite.stem
+@pytest.mark.parametrize("suite,board_name,report", SUITES, ids=[r for _, _, r in SUITES])
+def test_robot_suite(suite: Path, board_name: str, report: str, request: pytest.FixtureRequest) -> None:
+    # the board's images, built (or taken from the caches) before the timeout starts
+    imgs: qemu.Images = request.getfixturevalue("images" if board_name == "zynq7000_qemu" else "zynqmp_images")
+    assert imgs.firmware
+    out = REPO / "build" / "robot" / report
     robot = Path(sys.executable).with_name("robot")
     cmd = [str(robot), "--pythonpath", str(REPO / "python"), "--outputdir", str(out),
            "--console", "verbose", str(suite)]

@@ -109,6 +109,11 @@ def test_linux_dt_matches_board_yaml(board: qemu.Board, images: qemu.Images, var
     tcm = board.data["tcm"]
     assert [ranges[i + 3] for i in range(0, len(ranges), 6)] == [
         tcm["r5_0"]["atcm"], tcm["r5_0"]["btcm"], tcm["r5_1"]["atcm"], tcm["r5_1"]["btcm"]]
+    # R5 0's high vectors in OCM as the driver's "sram" carveout (a root
+    # node: the driver takes its reg untranslated as the device address)
+    hv = board.addr("servo", "high_vectors")
+    assert cells(fdtget(dtb, f"/sram@{hv:x}", "reg"))[0] == hv
+    assert fdtget(dtb, f"/sram@{hv:x}", "phandle") == fdtget(dtb, f"{rp}/r5f@0", "sram")
     fw = "/firmware/zynqmp-firmware"
     assert fdtget(dtb, fw, "compatible", "s") == "xlnx,zynqmp-firmware"
     assert fdtget(dtb, fw, "method", "s") == "smc"
@@ -168,3 +173,20 @@ def test_boot_tf_a_to_linux_shell(board: qemu.Board, images: qemu.Images, varian
         print(f"\n[zynqmp] {imgs.dtb.name}: {'no PMU behind TF-A (upstream QEMU), ' if pm_missing else ''}"
               f"shell after {shell:.1f} s on the host, userspace at {guest_userspace:.2f} s guest time",
               file=sys.stderr)
+
+
+@pytest.mark.board
+def test_west_emu_starts_the_default_r5_firmware(board: qemu.Board, images: qemu.Images) -> None:
+    """The issue's own check: ``west emu -b zynqmp_qemu -c 'echo start >
+    .../state; cat .../state'`` prints ``running``: the upstream driver
+    loads its default firmware name (rproc-ffe00000.r5f-fw, board.yaml
+    servo.default_firmware) and the R5's banner reaches UART1."""
+    rproc = "/sys/class/remoteproc/remoteproc0"
+    res = subprocess.run([sys.executable, str(REPO / "scripts/west_commands/emu.py"), "-b", board.name, "-c",
+                          f"cat {rproc}/firmware; echo start > {rproc}/state; cat {rproc}/state"],
+                         cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    out = res.stdout.splitlines()
+    default = board.servo["default_firmware"]["name"]
+    assert default in out and "running" in out, res.stdout[-3000:]
+    assert "servoamp r5-fw rsc: running" in res.stdout, res.stdout[-3000:]
