@@ -245,12 +245,15 @@ def prepare_images(
     """Build (or take from the caches) every image of a boot.
 
     ``firmware``: ELF files for /lib/firmware; default: the board's test
-    fixtures (:func:`build_test_firmware`) plus rpu_app's ELF(s) when they
-    exist (on the Zynq-7000; none yet on the ZynqMP). ``dts_variant``: see :meth:`Board.dts`.
+    fixtures (:func:`build_test_firmware`) plus rpu_app's ELF(s) for the
+    board (its servo devicetree picks the platform: the A9 or the R5). ``dts_variant``: see :meth:`Board.dts`.
     """
     if board.boot_flow == "tf-a":
-        return prepare_tf_a_images(board, build_test_firmware(board) if firmware is None else firmware,
-                                   dts_variant)
+        if firmware is None:
+            firmware = build_test_firmware(board)
+            if with_rpu_app:
+                firmware = list(firmware) + rpu_app_firmware(board)
+        return prepare_tf_a_images(board, firmware, dts_variant)
     kdir = kernel_dir()
     modules = build_modules(kdir)
     if firmware is None:

@@ -12,6 +12,11 @@ bindings, starting at the node named by /chosen/servoamp,servo, and writes:
                     and timer setting the firmware needs (BOARD_* macros)
   board_memory.ld   the linker MEMORY regions (carveout split into the
                     cacheable image part and the non-cacheable top part)
+  board_config.mk   PLATFORM: the folder of rpu_app/platform/ for this CPU
+
+What differs per SoC (the time base, the idle wake, the memory map for the
+MMU or the MPU, the cooperative stop) comes from the platform's gen.py,
+found by the servo CPU's compatible.
 
 Both files are rewritten only when their content changes, so make does not
 rebuild needlessly. Errors in the devicetree (missing nodes, a period the
@@ -28,15 +33,35 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_BINDINGS = HERE.parent / "dts" / "bindings"
-SECTION = 1 << 20  # MMU section (1 MiB)
+
 
 GIC_SPI, GIC_PPI = 0, 1
 GIC_IRQ_TYPE_EDGE_RISING, GIC_IRQ_TYPE_EDGE_FALLING = 1, 2
 GIC_IRQ_TYPE_LEVEL_HIGH, GIC_IRQ_TYPE_LEVEL_LOW = 4, 8
 
 
+PLATFORMS = HERE.parent / "platform"
+
+
 class GenError(Exception):
     pass
+
+
+def platform_for(cpu):
+    """The platform whose gen.py names the servo CPU's compatible
+    (rpu_app/platform/<soc>/gen.py: CPU_COMPATIBLE and the SoC's part of
+    the generation)."""
+    import importlib.util
+
+    for gen in sorted(PLATFORMS.glob("*/gen.py")):
+        spec = importlib.util.spec_from_file_location(f"platform_{gen.parent.name}", gen)
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        if mod.CPU_COMPATIBLE in cpu.compats:
+            mod.NAME = gen.parent.name
+            return mod
+    fail(cpu, f"no platform in {PLATFORMS} for CPU {cpu.compats}")
 
 
 def fail(node, msg: str):
@@ -206,6 +231,8 @@ def fieldbus(servo, period_us: int, put, fail):
         if ref % bitrate or not 8 <= ref // bitrate <= 256 * 25:
             fail(servo, f"can-bitrate {bitrate} not reachable from {ref} Hz")
         put("BOARD_CAN_REF_HZ", ref)
+    else:
+        put("BOARD_CAN_REF_HZ", 0, "no CAN controller")
     put("BOARD_CAN_BITRATE", bitrate)
     put("BOARD_CAN_PRIORITY", prio)
     for name, dflt, lo, hi in (("can-heartbeat-producer-ms", 20, 1, 65535),
@@ -250,14 +277,17 @@ def build(dts: Path, bindings: list[Path], board: str):
     cpu = prop(servo, "cpu")
     put("BOARD_CPU_ID", cpu.regs[0].addr if cpu.regs else 0, f"{cpu.path}")
 
+    # ---- the platform (rpu_app/platform/<soc>/gen.py), by the CPU -------
+    plat = platform_for(cpu)
+    put("BOARD_CPU_HAS_VBAR", 1 if plat.HAS_VBAR else 0, f"platform {plat.NAME}")
+    put("BOARD_GIC_OWNED", 1 if plat.GIC_OWNED else 0,
+        "this core's own GIC (enabled here), not one shared with Linux")
+
     # ---- memory ------------------------------------------------------
     carve = prop(servo, "memory-region")
     c_base, c_size = one_reg(carve)
-    if c_base % SECTION or c_size % SECTION:
-        fail(carve, "carveout must be 1 MiB aligned (MMU sections)")
     unc = prop(servo, "uncached-size")
-    if unc % SECTION or not 0 < unc < c_size:
-        fail(servo, "uncached-size must be a non-zero multiple of 1 MiB below the carveout size")
+    plat.check_carveout(carve, servo, c_base, c_size, unc, fail)
     trace = prop(servo, "trace-size")
     if not 256 <= trace <= unc or trace % 32:
         fail(servo, "trace-size must be 256..uncached-size bytes, multiple of 32")
@@ -274,49 +304,42 @@ def build(dts: Path, bindings: list[Path], board: str):
     a_base, a_size = one_reg(amp)
     put("BOARD_AMP_BASE", a_base, amp.path)
     put("BOARD_AMP_SIZE", a_size)
-    ctl = prop(servo, "stop-control")
-    put("BOARD_STOP_CONTROL_ADDR", one_reg(ctl, "control")[0], ctl.path)
-    put("BOARD_STOP_STATUS_ADDR", one_reg(ctl, "status")[0])
-    park = prop(servo, "cpu-park")
-    put("BOARD_PARK_ADDR", one_reg(park)[0], park.path)
-    boot = prop(servo, "boot-register")
-    put("BOARD_BOOT_REG_ADDR", one_reg(boot)[0], boot.path)
     ocm = amp.parent
     o_base, o_size = one_reg(ocm)
     put("BOARD_OCM_BASE", o_base, ocm.path)
     put("BOARD_OCM_SIZE", o_size)
-    for n in (amp, ctl, park, boot):
+    contract = [amp]
+    # The cooperative stop (servoamp's Zynq-7000 driver): control and status
+    # words, the park loop, the boot register. A platform whose remoteproc
+    # driver powers the core down (the R5's upstream one) has none.
+    if plat.STOP_CONTRACT:
+        ctl = prop(servo, "stop-control")
+        put("BOARD_STOP_CONTROL_ADDR", one_reg(ctl, "control")[0], ctl.path)
+        put("BOARD_STOP_STATUS_ADDR", one_reg(ctl, "status")[0])
+        park = prop(servo, "cpu-park")
+        put("BOARD_PARK_ADDR", one_reg(park)[0], park.path)
+        boot = prop(servo, "boot-register")
+        put("BOARD_BOOT_REG_ADDR", one_reg(boot)[0], boot.path)
+        contract += [ctl, park, boot]
+    else:
+        for name in ("stop-control", "cpu-park", "boot-register"):
+            if name in servo.props:
+                fail(servo, f"'{name}': platform {plat.NAME} has no cooperative stop")
+    put("BOARD_HAS_STOP_CONTRACT", 1 if plat.STOP_CONTRACT else 0)
+    for n in contract:
         if n.parent is not ocm:
             fail(n, "must be a child of the OCM node")
 
     # ---- interrupt controller and timers ------------------------------
     ttc = prop(servo, "cycle-timer")
     gic = ttc.interrupts[0].controller if ttc.interrupts else None
-    if gic is None or "arm,cortex-a9-gic" not in gic.compats:
-        fail(ttc, "interrupt parent must be an arm,cortex-a9-gic")
+    if gic is None or not set(gic.compats) & {"arm,cortex-a9-gic", "arm,pl390"}:
+        fail(ttc, "interrupt parent must be an arm,cortex-a9-gic or arm,pl390 (GICv1)")
     put("BOARD_GICD_BASE", one_reg(gic, "distributor")[0], gic.path)
     put("BOARD_GICC_BASE", one_reg(gic, "cpu")[0])
 
-    gt = prop(servo, "global-timer")
-    put("BOARD_GTIMER_BASE", one_reg(gt)[0], gt.path)
-    gt_hz = prop(gt, "clock-frequency")
-    if gt_hz % 1_000_000:
-        fail(gt, "clock-frequency must be a whole number of MHz")
-    put("BOARD_GTIMER_HZ", gt_hz)
-    put("BOARD_GTIMER_TICKS_PER_US", gt_hz // 1_000_000)
-
-    twd = prop(servo, "idle-timer")
-    put("BOARD_TWD_BASE", one_reg(twd)[0], twd.path)
-    twd_hz = prop(twd, "clock-frequency")
-    wake_us = prop(servo, "idle-wake-us")
-    if not 100 <= wake_us <= 1_000_000:
-        fail(servo, "idle-wake-us must be 100..1000000")
-    twd_irq, _ = gic_id(twd, 0)
-    if not 16 <= twd_irq < 32:
-        fail(twd, "the private timer's interrupt must be a PPI")
-    put("BOARD_TWD_IRQ", twd_irq, "GIC ID (PPI, banked per CPU)")
-    put("BOARD_IDLE_WAKE_LOAD", twd_hz // 1_000_000 * wake_us - 1,
-        f"private timer reload: {wake_us} us")
+    # the time base and the idle wake: the platform's
+    plat_devs = plat.timers(edt, cpu, servo, put, fail, prop, one_reg, gic_id)
 
     idx = prop(servo, "cycle-counter")
     if not 0 <= idx <= 2:
@@ -365,33 +388,23 @@ def build(dts: Path, bindings: list[Path], board: str):
     put("BOARD_UART_REF_HZ", prop(uart, "clock-frequency"))
     put("BOARD_UART_BAUD", prop(uart, "current-speed"))
 
-    slcr = edt.compat2okay.get("xlnx,zynq-slcr")
-    if not slcr:
+    # the Zynq-7000's SLCR: the console UART's clock gate is checked there
+    slcr = edt.compat2okay.get("xlnx,zynq-slcr", [])
+    if plat.SLCR and not slcr:
         raise GenError(f"{dts}: no xlnx,zynq-slcr node")
-    put("BOARD_SLCR_BASE", one_reg(slcr[0])[0], slcr[0].path)
+    put("BOARD_HAS_SLCR", 1 if slcr else 0)
+    if slcr:
+        put("BOARD_SLCR_BASE", one_reg(slcr[0])[0], slcr[0].path)
 
     can_devs = fieldbus(servo, period, put, fail)
 
     put("BOARD_ATTACH_RETRY_CYCLES", prop(servo, "attach-retry-cycles"))
     put("BOARD_STATS_CYCLES", prop(servo, "stats-cycles"))
 
-    # ---- MMU map: 1 MiB sections of every device node the firmware uses
-    dev_sections: dict[int, str] = {}
-    for n in (uart, ttc, gic, gt, slcr[0], *can_devs):
-        for r in n.regs:
-            for s in range(r.addr // SECTION, (r.addr + r.size - 1) // SECTION + 1):
-                dev_sections.setdefault(s * SECTION, n.path)
-    ocm_sections = sorted({s * SECTION for s in range(o_base // SECTION, (o_base + o_size - 1) // SECTION + 1)})
-    for s in ocm_sections:
-        if s in dev_sections:
-            fail(ocm, f"shares MMU section {s:#x} with device {dev_sections[s]}")
-    mmu = []
-    mmu.append((c_base, c_size - unc, "MMU_NORMAL_WB", "carveout image"))
-    mmu.append((c_base + c_size - unc, unc, "MMU_NORMAL_NC", "carveout uncached top"))
-    for s in ocm_sections:
-        mmu.append((s, SECTION, "MMU_NORMAL_NC", "OCM (amp_lib, stop words, boot register)"))
-    for s, path in sorted(dev_sections.items()):
-        mmu.append((s, SECTION, "MMU_DEVICE", path))
+    # ---- memory protection: what the firmware uses, nothing else ------
+    devices = [uart, ttc, gic, *slcr[:1], *plat_devs, *can_devs]
+    mmu = plat.memory_map(cfg, carve, ocm, devices, fail)
+    put("__PLATFORM__", plat.NAME)
 
     return cfg, comments, mmu
 
@@ -414,7 +427,7 @@ def render_header(cfg, comments, mmu, board: str, dts: Path) -> str:
     ]
     xmacros = cfg.get("__X_MACROS__", {})
     for k, v in cfg.items():
-        if k == "__X_MACROS__":
+        if k in ("__X_MACROS__", "__PLATFORM__", "__MEMPROT_MACRO__", "__LD_EXTRA__"):
             continue
         val = f"BOARD_U(0x{v:08x})" if k.endswith(("_BASE", "_ADDR", "_SIZE", "_Q16")) else f"BOARD_U({v})"
         c = comments.get(k)
@@ -423,9 +436,10 @@ def render_header(cfg, comments, mmu, board: str, dts: Path) -> str:
         out += ["", f"/* {what} */", f"#define {name}(X) \\"]
         out += [f"\t{r} \\" for r in rows]
         out.append("")
+    macro, what_regions = cfg["__MEMPROT_MACRO__"]  # type: ignore[misc]
     out += ["", "#ifndef __ASSEMBLER__",
-            "/* MMU regions: X(base, size, attributes) in 1 MiB sections. */",
-            "#define BOARD_MMU_REGIONS(X) \\"]
+            f"/* {what_regions}: X(base, size, attributes). */",
+            f"#define {macro}(X) \\"]
     for base, size, attr, what in mmu:
         out.append(f"\tX(0x{base:08x}u, 0x{size:08x}u, {attr}) /* {what} */ \\")
     out += ["", "#endif /* __ASSEMBLER__ */", "", "#endif /* BOARD_CONFIG_H */", ""]
@@ -445,6 +459,16 @@ def render_ld(cfg, board: str) -> str:
         f"__carveout_start = 0x{cfg['BOARD_CARVEOUT_BASE']:08x};",
         f"__carveout_end = 0x{cfg['BOARD_CARVEOUT_BASE'] + cfg['BOARD_CARVEOUT_SIZE']:08x};",
         f"__trace_size = 0x{cfg['BOARD_TRACE_SIZE']:x};",
+        *cfg.get("__LD_EXTRA__", []),  # type: ignore[misc]
+        "",
+    ])
+
+
+def render_mk(cfg, board: str) -> str:
+    return "\n".join([
+        "# Generated by rpu_app/scripts/gen_board_header.py: do not edit.",
+        f"# Board: {board}",
+        f"PLATFORM := {cfg['__PLATFORM__']}",
         "",
     ])
 
@@ -476,6 +500,7 @@ def main(argv=None) -> int:
     a.out_dir.mkdir(parents=True, exist_ok=True)
     write_if_changed(a.out_dir / "board_config.h", render_header(cfg, comments, mmu, a.board, a.dts))
     write_if_changed(a.out_dir / "board_memory.ld", render_ld(cfg, a.board))
+    write_if_changed(a.out_dir / "board_config.mk", render_mk(cfg, a.board))
     return 0
 
 

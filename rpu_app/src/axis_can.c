@@ -35,7 +35,7 @@
 #include "canopen_master.h"
 #include "canps.h"
 #include "arch.h"
-#include "gtimer.h"
+#include "timebase.h"
 #include "irq.h"
 #include "log.h"
 
@@ -156,6 +156,8 @@ void axis_can_init(const struct axis_params *k)
 	}
 	BOARD_AXES(AXIS_ROW)
 #undef AXIS_ROW
+	if (!n_can)
+		return;	/* no axis on a CAN drive (or no CAN controller) */
 	if (canps_timing_for(BOARD_CAN_REF_HZ, BOARD_CAN_BITRATE, &t)) {
 		log_printf("error: can: %u bit/s not reachable from %u Hz\n", (unsigned)BOARD_CAN_BITRATE,
 			   (unsigned)BOARD_CAN_REF_HZ);
@@ -221,7 +223,7 @@ void axis_can_cycle_end(void)
 		if (!bus[b].ok)
 			continue;
 		if (co_master_stamp_due(&bus[b].m))
-			co_master_time_stamp(&bus[b].m, (uint32_t)(gtimer_now() / BOARD_GTIMER_TICKS_PER_US));
+			co_master_time_stamp(&bus[b].m, (uint32_t)(timebase_now() / BOARD_TIMEBASE_TICKS_PER_US));
 		co_master_cycle(&bus[b].m);
 	}
 }
@@ -305,7 +307,7 @@ static void log_changes(uint32_t i, const struct co_node *n)
 	/* what, then where in time: the master's cycle and the global timer */
 	log_printf("axis%u: can%u node %u: %s%s error %04x (cycle %u, t_us %u)\n", (unsigned)i,
 		   (unsigned)a->bus, (unsigned)a->node, what, n->fault ? ", fault," : ",", (unsigned)n->error_code,
-		   (unsigned)bus[a->bus].m.cycle, (unsigned)(gtimer_now() / BOARD_GTIMER_TICKS_PER_US));
+		   (unsigned)bus[a->bus].m.cycle, (unsigned)(timebase_now() / BOARD_TIMEBASE_TICKS_PER_US));
 }
 
 static void can_cycle(uint32_t i, const struct axis_params *k, const struct axis_in *in,

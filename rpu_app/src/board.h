@@ -12,8 +12,8 @@
 
 #include "board_config.h"
 
-/* amp_lib bare-metal port hook: rate of amp_board_ticks() (gtimer.c). */
-#define AMP_BOARD_TICKS_PER_US BOARD_GTIMER_TICKS_PER_US
+/* amp_lib bare-metal port hook: rate of amp_board_ticks() (the platform time base, timebase.h). */
+#define AMP_BOARD_TICKS_PER_US BOARD_TIMEBASE_TICKS_PER_US
 uint32_t amp_board_ticks(void);
 
 /* The driver's control word and our status word: STOP, RUN!, PRKD, CRSH. */

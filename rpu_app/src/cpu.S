@@ -1,11 +1,11 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * cpu.S - cache maintenance and the final step of the cooperative stop.
+ * cpu.S - ARMv7 cache maintenance by set/way (both platforms) and the
+ * nesting self-test's VFP probe.
  *
- * Written in assembly because they must not touch memory through the data
- * cache while it is being switched: no stack use between turning the
- * D-cache off and the clean/invalidate, and none after the MMU is off
- * except the status-word store.
+ * Written in assembly because the cache maintenance must not touch memory
+ * through the data cache while it is being switched (platform/zynq7000_a9/
+ * park.S runs dcache_setway_regs with the D-cache already off).
  */
 	.syntax unified
 	.arm
@@ -23,7 +23,7 @@
  *
  * dcache_setway_regs is the same loop without any memory access (no
  * stack): it uses r0-r3 and r7-r12 and keeps r4-r6, sp and lr, so that
- * cpu_park can run it with the D-cache already off (a push there could be
+ * cpu_park (platform/zynq7000_a9/park.S) can run it with the D-cache already off (a push there could be
  * overwritten by the write-back of a stale dirty line of the stack).
  */
 	.global dcache_setway
@@ -34,6 +34,7 @@ dcache_setway:
 	pop	{r4-r11, pc}
 	.size dcache_setway, . - dcache_setway
 
+	.global dcache_setway_regs
 	.type dcache_setway_regs, %function
 dcache_setway_regs:
 	mov	r11, r0			/* op */
@@ -76,45 +77,6 @@ dcache_setway_regs:
 	isb
 	bx	lr
 	.size dcache_setway_regs, . - dcache_setway_regs
-
-/*
- * cpu_park(park_addr, status_addr, status_value): never returns.
- * IRQ/FIQ masked, SVC mode; D-cache off, then clean+invalidate it (the
- * order ARM recommends, so no line can be allocated after the clean),
- * MMU/I-cache/branch prediction off, TLB/I-cache/BTB invalidated; then
- * the status word is written and the core branches to the park loop,
- * which waits (wfe) for the boot register to hold a new entry.
- * The caller has stopped every interrupt source of the firmware.
- */
-	.global cpu_park
-	.type cpu_park, %function
-cpu_park:
-	cpsid	aif, #0x13
-	mov	r4, r0
-	mov	r5, r1
-	mov	r6, r2
-	mrc	p15, 0, r0, c1, c0, 0
-	bic	r0, r0, #(1 << 2)	/* C off */
-	mcr	p15, 0, r0, c1, c0, 0
-	isb
-	mov	r0, #1
-	bl	dcache_setway_regs	/* clean+invalidate, no stack */
-	mrc	p15, 0, r0, c1, c0, 0
-	bic	r0, r0, #(1 << 0)	/* M */
-	bic	r0, r0, #(1 << 11)	/* Z */
-	bic	r0, r0, #(1 << 12)	/* I */
-	mcr	p15, 0, r0, c1, c0, 0
-	isb
-	mov	r0, #0
-	mcr	p15, 0, r0, c7, c5, 0	/* ICIALLU */
-	mcr	p15, 0, r0, c7, c5, 6	/* BPIALL */
-	mcr	p15, 0, r0, c8, c7, 0	/* TLBIALL */
-	dsb
-	isb
-	str	r6, [r5]		/* status word: "PRKD" */
-	dsb
-	bx	r4			/* park loop (ARM code in OCM) */
-	.size cpu_park, . - cpu_park
 
 /*
  * fpu_nest_probe(sgir, word, seen): the nesting self-test's VFP half.

@@ -21,7 +21,7 @@
 #include "gic.h"
 #include "irq.h"
 #include "log.h"
-#include "mmu.h"
+#include "memprot.h"
 #include "servo.h"
 #include "ttc.h"
 
@@ -38,8 +38,10 @@ void fault_report(uint32_t kind, const uint32_t *frame)
 	uint32_t ids[8], n;
 
 	/* frame: spsr, r0..r12, return address (faulting instruction). */
+#if BOARD_HAS_STOP_CONTRACT
 	mmio_write32(BOARD_STOP_STATUS_ADDR, ZSR_STATUS_CRASHED);
 	dsb();
+#endif
 	if (!in_fault) {
 		in_fault = 1;
 		log_printf("FAULT: %s at pc=%08x spsr=%08x mode=%02x nest=%u\n",
@@ -50,13 +52,13 @@ void fault_report(uint32_t kind, const uint32_t *frame)
 		log_printf("FAULT: dfsr=%08x dfar=%08x ifsr=%08x ifar=%08x\n",
 			   (unsigned)CP15_READ(0, c5, c0, 0), (unsigned)dfar,
 			   (unsigned)CP15_READ(0, c5, c0, 1), (unsigned)CP15_READ(0, c6, c0, 2));
-		/* The no-access page below the SVC stack (servo.ld, mmu.c). */
-		if (kind == KIND_DATA_ABORT && mmu_enabled() && dfar >= mmu_stack_guard_start() &&
-		    dfar < mmu_stack_guard_end())
+		/* The no-access page below the SVC stack (servo.ld, the platform's memprot). */
+		if (kind == KIND_DATA_ABORT && memprot_enabled() && dfar >= memprot_stack_guard_start() &&
+		    dfar < memprot_stack_guard_end())
 			log_printf("FAULT: SVC stack overflow: access at %08x in the guard page [%08x, %08x) "
 				   "below the %u-byte SVC stack\n",
-				   (unsigned)dfar, (unsigned)mmu_stack_guard_start(),
-				   (unsigned)mmu_stack_guard_end(), (unsigned)svc_stack_size());
+				   (unsigned)dfar, (unsigned)memprot_stack_guard_start(),
+				   (unsigned)memprot_stack_guard_end(), (unsigned)svc_stack_size());
 		for (unsigned i = 0; i < 13u; i += 4u)
 			log_printf("FAULT: r%u..: %08x %08x %08x %08x\n", i,
 				   (unsigned)frame[1 + i], (unsigned)(i + 1u < 13u ? frame[2 + i] : 0u),
@@ -66,14 +68,20 @@ void fault_report(uint32_t kind, const uint32_t *frame)
 		for (uint32_t i = 0; i < n && i < sizeof(ids) / sizeof(ids[0]); i++)
 			log_printf("FAULT: completed irq %u (acknowledged, in service at the fault)\n",
 				   (unsigned)ids[i]);
+#if BOARD_HAS_STOP_CONTRACT
 		log_printf("FAULT: waiting for STOP at %p\n", (void *)(uintptr_t)BOARD_STOP_CONTROL_ADDR);
+#else
+		log_printf("FAULT: halted until the remoteproc driver powers this core down\n");
+#endif
 		log_flush();
 	}
 	(void)irq_complete_all(0, 0);	/* a fault in the fault report: once more */
 	for (;;) {
+#if BOARD_HAS_STOP_CONTRACT
 		if (mmio_read32(BOARD_STOP_CONTROL_ADDR) == ZSR_CTRL_STOP) {
 			in_fault = 0;
 			servo_quiesce_and_park();
 		}
+#endif
 	}
 }

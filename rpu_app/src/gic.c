@@ -46,6 +46,31 @@ int gic_dist_enabled(void)
 	return (mmio_read32(D(GICD_CTLR)) & 1u) != 0;
 }
 
+/* A GIC of this core's own (the RPU's): enable its distributor. A GIC
+ * shared with Linux (the A9's) is never enabled here (BOARD_GIC_OWNED). */
+void gic_dist_enable(void)
+{
+	mmio_write32(D(GICD_CTLR), 1u);
+	dsb();
+}
+
+/*
+ * This core's CPU interface as a target mask: GICD_ITARGETSR0..7 (the
+ * SGIs', banked) read as the reading core's own mask (GICv1/v2), which is
+ * how Linux's GIC driver finds it too. MPIDR would not do on every chip
+ * (QEMU gives the ZynqMP's R5s Aff0 4 and 5, their GIC interfaces are 0
+ * and 1).
+ */
+static uint8_t gic_self_mask(void)
+{
+	return mmio_read8(D(GICD_ITARGETSR));
+}
+
+static uint32_t gic_self_cpu(void)
+{
+	return (uint32_t)__builtin_ctz(gic_self_mask() | 0x100u);
+}
+
 void gic_cpu_init(uint32_t pmr, uint32_t bpr)
 {
 	mmio_write32(C(GICC_CTLR), 0);
@@ -77,7 +102,7 @@ void gic_irq_config(uint32_t id, uint32_t prio, int level)
 
 		if (want != v)
 			mmio_write32(reg, want);
-		mmio_write8(D(GICD_ITARGETSR + id), (uint8_t)(1u << mpidr_cpu()));
+		mmio_write8(D(GICD_ITARGETSR + id), gic_self_mask());
 	}
 	mmio_write32(D(GICD_ICPENDR + 4u * (id / 32u)), bit);
 	dsb();
@@ -146,7 +171,7 @@ static int gic_own_active(uint32_t id)
 {
 	if (!gic_active(id))
 		return 0;
-	return id < 32u || mmio_read8(D(GICD_ITARGETSR + id)) == (uint8_t)(1u << mpidr_cpu());
+	return id < 32u || mmio_read8(D(GICD_ITARGETSR + id)) == gic_self_mask();
 }
 
 static uint32_t gic_num_irqs(void)
@@ -187,7 +212,7 @@ void gic_drain_own_active(struct gic_drain *dr)
 		/* An SGI's EOIR names its source: this core's own SGIs are sent
 		 * to itself (gic_sgi_self). */
 		dsb();
-		gic_eoi(best < 16u ? best | (mpidr_cpu() << 10) : best);
+		gic_eoi(best < 16u ? best | (gic_self_cpu() << 10) : best);
 		dsb();
 		dr->id[dr->n] = best;
 		dr->prio[dr->n] = best_prio;

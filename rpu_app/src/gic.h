@@ -12,6 +12,7 @@
  * interrupts it registered. GICD_CTLR belongs to Linux: it is only read.
  */
 int gic_dist_enabled(void);
+void gic_dist_enable(void);	/* only for a GIC of this core's own */
 void gic_cpu_init(uint32_t pmr, uint32_t bpr);
 void gic_cpu_disable(void);
 /* Configure one owned interrupt (disabled on return). */

@@ -5,7 +5,7 @@
 #include "arch.h"
 #include "gic.h"
 #include "irq.h"
-#include "mmu.h"
+#include "memprot.h"
 
 #ifndef IRQ_NESTING
 #define IRQ_NESTING 1
@@ -52,17 +52,17 @@ void irq_init(void)
 
 int irq_debug_abort_next(uint32_t id)
 {
-	if (id >= IRQ_MAX_ID || !mmu_enabled())
+	if (id >= IRQ_MAX_ID || !memprot_enabled())
 		return -1;	/* no guard page: nothing would fault */
 	irq_debug_abort = id + 1u;
 	return 0;
 }
 
 /* The access a stack overflow would make: a data abort on the SVC stack's
- * guard page (mmu.c), taken inside the dispatcher. */
+ * guard (the platform's memprot), taken inside the dispatcher. */
 static __attribute__((noinline)) void irq_debug_fault(void)
 {
-	mmio_write32(mmu_stack_guard_start(), 0);
+	mmio_write32(memprot_stack_guard_start(), 0);
 }
 
 int irq_register(uint32_t id, irq_handler_t handler, irq_clear_t clear,

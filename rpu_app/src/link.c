@@ -81,11 +81,11 @@ const char *link_backend(void)
 #include "app.h"
 #include "arch.h"
 #include "gic.h"
-#include "gtimer.h"
+#include "timebase.h"
 #include "irq.h"
 #include "link.h"
 #include "log.h"
-#include "mmu.h"
+#include "memprot.h"
 #include "servo.h"
 #include "servoamp/servo_proto.h"
 #include "ttc.h"
@@ -186,7 +186,7 @@ void link_cycle(uint32_t t_entry, uint32_t lat_ns)
 	}
 	was_ss = (uint32_t)app_in_safestop();
 	rc = amp_servo_cycle_rx(&amp, RX_TIMEOUT_US * AMP_BOARD_TICKS_PER_US, &rx);
-	t1 = gtimer_now32();
+	t1 = timebase_now32();
 	if (rc == AMP_E_STALLED) {
 		enter_safestop(SP_FAULT_LINUX_STALL, 1);
 	} else if (rc == AMP_E_PEER_ABSENT) {
@@ -208,14 +208,14 @@ void link_cycle(uint32_t t_entry, uint32_t lat_ns)
 	if (app_in_safestop() && !link_diag.standstill_cycle && app_stop_cycles())
 		link_diag.standstill_cycle = link_diag.safestop_cycle + app_stop_cycles() - 1u;
 	if (link_debug.slow_us) {	/* debug: a slow control law */
-		uint32_t w = link_debug.slow_us * BOARD_GTIMER_TICKS_PER_US;
+		uint32_t w = link_debug.slow_us * BOARD_TIMEBASE_TICKS_PER_US;
 
-		while (gtimer_now32() - t1 < w)
+		while (timebase_now32() - t1 < w)
 			compiler_barrier();
 	}
-	t2 = gtimer_now32();
+	t2 = timebase_now32();
 	(void)amp_servo_cycle_tx(&amp, fb, n, t_entry, lat_ns / (1000u / AMP_BOARD_TICKS_PER_US));
-	t3 = gtimer_now32();
+	t3 = timebase_now32();
 
 	cost.n++;
 	t3 -= t_entry;
@@ -457,12 +457,12 @@ static int32_t serve(const struct amp_mbox_req *req, uint32_t *out, uint32_t *le
 			log_printf("debug: fault requested: servo line FAULT, then cycle work and heartbeat stop\n");
 			fault_req = 1;	/* after the answer (link_poll) */
 		} else if (what == SP_DEBUG_STACK) {
-			if (!mmu_enabled())
+			if (!memprot_enabled())
 				return SP_E_STATE;	/* no guard page: it would be silent */
 			log_printf("debug: SVC stack overflow requested: the next cycle handler recurses into the guard page\n");
 			stack_pending = 1;	/* armed after the answer (link_poll) */
 		} else if (what == SP_DEBUG_IRQ_ABORT) {
-			if (!mmu_enabled())
+			if (!memprot_enabled())
 				return SP_E_STATE;	/* no guard page to fault on */
 			log_printf("debug: abort requested: the next cycle interrupt faults right after its acknowledge\n");
 			irq_abort_pending = 1;	/* armed after the answer (link_poll) */

@@ -17,12 +17,12 @@
 #include "axis.h"
 #endif
 #include "gic.h"
-#include "gtimer.h"
+#include "timebase.h"
 #include "idle_timer.h"
 #include "irq.h"
 #include "link.h"
 #include "log.h"
-#include "mmu.h"
+#include "memprot.h"
 #include "servo.h"
 #include "ttc.h"
 #include "uart.h"
@@ -38,7 +38,7 @@
 
 #define GIC_PMR 0xf0u		/* accept every priority above 0xf0 */
 #define GIC_BPR 2u		/* group priority = bits [7:3]: 32 groups */
-#define NS_PER_GT_TICK (1000u / BOARD_GTIMER_TICKS_PER_US)
+#define NS_PER_GT_TICK (1000u / BOARD_TIMEBASE_TICKS_PER_US)
 
 extern uint32_t __stacks_start[], __svc_stack_top[], __svc_stack_bottom[];
 extern char __image_end[];
@@ -92,14 +92,14 @@ static void nest_test_handler(void *arg)
 static uint32_t nest_test_latency(void *arg)
 {
 	(void)arg;
-	return (gtimer_now32() - sgi_stamp) * NS_PER_GT_TICK;
+	return (timebase_now32() - sgi_stamp) * NS_PER_GT_TICK;
 }
 
 static int stop_requested(void);
 
 static void cycle_handler(void *arg)
 {
-	uint32_t now = gtimer_now32();
+	uint32_t now = timebase_now32();
 	uint32_t lat = ttc_cycle_since_fire_ns(0);
 	uint32_t c = cycles;
 	uint32_t pns = ttc_period_ns();
@@ -143,7 +143,7 @@ static void cycle_handler(void *arg)
 		uint32_t r;
 
 		fpu_res = 0;
-		sgi_stamp = gtimer_now32();
+		sgi_stamp = timebase_now32();
 		r = fpu_nest_probe(gic_sgir(), gic_sgi_self_word(BOARD_NEST_TEST_SGI), &sgi_seen);
 		if (r == 10u) {
 			nest_fail++;
@@ -204,7 +204,7 @@ static void print_stats(void)
 	log_get_stats(&ls);
 	log_printf("stats cycle=%u guest_us=%u period_min_ns=%u period_max_ns=%u overruns=%u missed=%u nest_max=%u "
 		   "nest_test_ok=%u nest_test_fail=%u fpu_test_ok=%u fpu_test_fail=%u fpu_test_why=%u\n",
-		   (unsigned)c, (unsigned)((gtimer_now() - gt_start) / BOARD_GTIMER_TICKS_PER_US),
+		   (unsigned)c, (unsigned)((timebase_now() - gt_start) / BOARD_TIMEBASE_TICKS_PER_US),
 		   (unsigned)(c > 1u ? pmin : 0u), (unsigned)pmax, (unsigned)ovr, (unsigned)mis,
 		   (unsigned)irq_nest_max(), (unsigned)nest_ok, (unsigned)nest_fail, (unsigned)fpu_ok,
 		   (unsigned)fpu_fail, (unsigned)fpu_fail_why);
@@ -223,11 +223,23 @@ static void print_stats(void)
 #endif
 }
 
+/*
+ * The cooperative stop (the Zynq-7000's driver: STOP in the control word,
+ * PRKD after parking) where the board has that contract. Linux's upstream
+ * R5 driver has none: it powers the core down (FORCE_POWERDOWN) without
+ * asking, so there the firmware never sees a stop (servod tells a stop
+ * on request from a stall by remoteproc's state: docs/cycle.md).
+ */
 static int stop_requested(void)
 {
+#if BOARD_HAS_STOP_CONTRACT
 	return mmio_read32(BOARD_STOP_CONTROL_ADDR) == ZSR_CTRL_STOP;
+#else
+	return 0;
+#endif
 }
 
+#if BOARD_HAS_STOP_CONTRACT
 __attribute__((noreturn)) void servo_quiesce_and_park(void)
 {
 	cpu_irq_disable();
@@ -243,9 +255,17 @@ __attribute__((noreturn)) void servo_quiesce_and_park(void)
 	log_printf("stop: STOP seen after %u cycles; interrupts released, timer stopped; parking at %p\n",
 		   (unsigned)cycles, (void *)(uintptr_t)BOARD_PARK_ADDR);
 	log_flush();
-	/* Caches cleaned and MMU off inside cpu_park (cpu.S), then PRKD. */
+	/* Caches cleaned and MMU off inside cpu_park (park.S), then PRKD. */
 	cpu_park(BOARD_PARK_ADDR, BOARD_STOP_STATUS_ADDR, ZSR_STATUS_PARKED);
 }
+#else
+__attribute__((noreturn)) void servo_quiesce_and_park(void)
+{
+	/* No stop contract: never asked to stop (stop_requested() is 0). */
+	for (;;)
+		wfi();
+}
+#endif
 
 uint32_t start_irq_drained(void)
 {
@@ -310,17 +330,23 @@ __attribute__((noreturn)) void servo_main(void)
 	fpu_ref = fpu_bits(fpu_work(fpu_in));	/* outside any interrupt */
 
 #if CONFIG_MMU
-	mmu_init();
+	memprot_init();
 #endif
 	log_init();
 	uart_ok = uart_init() == 0;
 	banner();	/* always the first line, on both sinks */
 	if (!uart_ok)
 		log_printf("uart: console UART clock gated in SLCR; logging to trace only\n");
+#if BOARD_CPU_HAS_VBAR
 	log_printf("cpu%u: mpidr=%08x vbar=%08x sctlr=%08x mmu=%s\n",
 		   (unsigned)mpidr_cpu(), (unsigned)CP15_READ(0, c0, c0, 5),
 		   (unsigned)CP15_READ(0, c12, c0, 0), (unsigned)CP15_READ(0, c1, c0, 0),
-		   mmu_enabled() ? "on (L1 I+D, carveout inner-WB, OCM/trace non-cacheable)" : "off");
+		   memprot_enabled() ? memprot_describe() : "off");
+#else
+	log_printf("cpu%u: mpidr=%08x sctlr=%08x (no VBAR: vectors at 0x0) mpu=%s\n",
+		   (unsigned)mpidr_cpu(), (unsigned)CP15_READ(0, c0, c0, 5), (unsigned)CP15_READ(0, c1, c0, 0),
+		   memprot_enabled() ? memprot_describe() : "off");
+#endif
 	log_printf("memory: image %p..%p carveout %08x+%08x trace %p+%u amp %08x+%08x\n",
 		   (void *)BOARD_IMAGE_BASE, (void *)__image_end, (unsigned)BOARD_CARVEOUT_BASE,
 		   (unsigned)BOARD_CARVEOUT_SIZE, (void *)trace_buf, (unsigned)BOARD_TRACE_SIZE,
@@ -328,14 +354,17 @@ __attribute__((noreturn)) void servo_main(void)
 	if (mpidr_cpu() != BOARD_CPU_ID)
 		log_printf("warning: running on cpu%u, devicetree says cpu%u\n",
 			   (unsigned)mpidr_cpu(), (unsigned)BOARD_CPU_ID);
-	if (gtimer_init(&gt_ps))
-		log_printf("warning: global timer stopped (Linux starts it): tick-based figures are wrong\n");
+	if (timebase_init(&gt_ps))
+		log_printf("warning: time base stopped (its owner starts it): tick-based figures are wrong\n");
 	else if (gt_ps)
-		log_printf("gtimer: prescaler %u set by its owner; ticks scaled by %u to %u MHz units\n",
-			   (unsigned)gt_ps, (unsigned)(gt_ps + 1u), (unsigned)BOARD_GTIMER_TICKS_PER_US);
+		log_printf("timebase: prescaler %u set by its owner; ticks scaled by %u to %u MHz units\n",
+			   (unsigned)gt_ps, (unsigned)(gt_ps + 1u), (unsigned)BOARD_TIMEBASE_TICKS_PER_US);
 	log_flush();
 
 	irq_init();
+#if BOARD_GIC_OWNED
+	gic_dist_enable();	/* this core's own GIC (the RPU's): enabled here */
+#endif
 	if (!gic_dist_enabled())
 		log_printf("warning: GIC distributor disabled (owned by Linux, not enabled here); "
 			   "no interrupt until it is\n");
@@ -352,7 +381,7 @@ __attribute__((noreturn)) void servo_main(void)
 		log_printf("error: interrupt registration failed\n");
 
 	link_init();
-	gt_start = gtimer_now();
+	gt_start = timebase_now();
 	/* A restart finds the cycle timer running (ttc.c): its period stands
 	 * until Linux sets cycle_period_us again, and Linux loses no cycle. */
 	period_us = ttc_running_period_us();
@@ -371,8 +400,8 @@ __attribute__((noreturn)) void servo_main(void)
 	irq_enable(BOARD_NEST_TEST_SGI);
 	irq_enable(BOARD_CYCLE_IRQ);
 	if (idle_timer_start())
-		log_printf("error: idle wake (private timer, irq %u) not registered: STOP is seen only while cycle interrupts come\n",
-			   (unsigned)BOARD_TWD_IRQ);
+		log_printf("error: idle wake (the platform's idle_timer.c) not registered: STOP is seen only while "
+			   "cycle interrupts come\n");
 	cpu_irq_enable();
 
 	log_printf("cycle: irq %u (%s) prio %02x, ttc %08x counter %u, period %u us "
@@ -384,10 +413,14 @@ __attribute__((noreturn)) void servo_main(void)
 		   (unsigned)(BOARD_CYCLE_PS_EN ? 2u << BOARD_CYCLE_PS_V : 1u),
 		   (unsigned)BOARD_NEST_TEST_SGI, (unsigned)BOARD_NEST_TEST_PRIORITY);
 
+#if BOARD_HAS_STOP_CONTRACT
 	mmio_write32(BOARD_STOP_STATUS_ADDR, ZSR_STATUS_RUNNING);
 	dsb();
 	log_printf("running: status %p = RUN!, polling stop word %p\n",
 		   (void *)(uintptr_t)BOARD_STOP_STATUS_ADDR, (void *)(uintptr_t)BOARD_STOP_CONTROL_ADDR);
+#else
+	log_printf("running: no stop word (the remoteproc driver powers this core down to stop it)\n");
+#endif
 
 	for (;;) {
 		uint32_t c;
@@ -413,8 +446,8 @@ __attribute__((noreturn)) void servo_main(void)
 		if (c - last_stats >= BOARD_STATS_CYCLES) {
 			last_stats = c;
 			print_stats();
-			if (gtimer_changed())
-				log_printf("warning: global timer prescaler changed by its owner\n");
+			if (timebase_changed())
+				log_printf("warning: time base prescaler changed by its owner\n");
 		}
 		/* Sleep until the next interrupt while the distributor is
 		 * enabled by its owner: the cycle interrupt, or at the latest

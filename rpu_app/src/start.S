@@ -3,10 +3,10 @@
  * start.S - entry, exception vectors and the IRQ entry of rpu_app.
  *
  * Entry contract (docs: rpu_app/README.md): ARM state, SVC mode, IRQ/FIQ
- * masked, Secure, MMU off, r0-r3 undefined. The same entry is used for a
- * first start and for every restart after a cooperative stop, so nothing
- * here relies on earlier contents of RAM: .bss is cleared, every stack
- * pointer and VBAR are set again.
+ * masked, Secure, MMU (MPU) off, r0-r3 undefined. The same entry is used
+ * for a first start and for every restart after a cooperative stop, so
+ * nothing here relies on earlier contents of RAM: .bss is cleared, every
+ * stack pointer and VBAR (where there is one) are set again.
  */
 	.syntax unified
 	.arm
@@ -17,12 +17,22 @@
 #define MODE_ABT 0x17
 #define MODE_UND 0x1b
 
+#include "board_config.h"
+
 /* ------------------------------------------------------------------ */
-/* Vector table: VBAR points here (never the shared low vectors).      */
+/*
+ * Vector table. With a VBAR (the A9) VBAR points here, at the start of the
+ * image, never the shared low vectors. Without one (the Cortex-R5) the
+ * link script puts it at 0x0, the ATCM, where the core starts (Linux's
+ * upstream R5 driver always starts it at the low vectors: docs/
+ * boot-flow-zynqmp.md), and the entries jump anywhere (the image may be
+ * in DDR): absolute loads of pc from the literal pool that follows.
+ */
 	.section .vectors, "ax"
 	.align 5
 	.global _vectors
 _vectors:
+#if BOARD_CPU_HAS_VBAR
 	b	_start			/* reset (not used through VBAR) */
 	b	undef_entry
 	b	svc_entry
@@ -31,6 +41,17 @@ _vectors:
 	b	.			/* reserved */
 	b	irq_entry
 	b	fiq_entry
+#else
+	ldr	pc, =_start
+	ldr	pc, =undef_entry
+	ldr	pc, =svc_entry
+	ldr	pc, =pabt_entry
+	ldr	pc, =dabt_entry
+	b	.			/* reserved */
+	ldr	pc, =irq_entry
+	ldr	pc, =fiq_entry
+	.ltorg
+#endif
 
 /* ------------------------------------------------------------------ */
 	.section .text.entry, "ax"
@@ -39,8 +60,9 @@ _vectors:
 _start:
 	cpsid	aif, #MODE_SVC		/* SVC, IRQ/FIQ/async aborts masked */
 
-	/* SCTLR: keep MMU/caches off (entered off; enabled later by mmu.c),
-	 * low vectors mode (V=0) so VBAR is used, exceptions in ARM state. */
+	/* SCTLR: keep MMU or MPU and caches off (entered off; enabled later
+	 * by memprot_init), low vectors (V=0: VBAR on the A9, 0x0 on the R5),
+	 * exceptions in ARM state. */
 	mrc	p15, 0, r0, c1, c0, 0
 	bic	r0, r0, #(1 << 0)	/* M */
 	bic	r0, r0, #(1 << 2)	/* C */
@@ -50,9 +72,11 @@ _start:
 	mcr	p15, 0, r0, c1, c0, 0
 	isb
 
+#if BOARD_CPU_HAS_VBAR
 	ldr	r0, =_vectors
 	mcr	p15, 0, r0, c12, c0, 0	/* VBAR (Secure bank of this core) */
 	isb
+#endif
 
 	/* One stack per mode. SVC is the main one (IRQ handlers run on it
 	 * too, see irq_entry); the others are small. */

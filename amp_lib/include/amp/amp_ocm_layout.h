@@ -18,6 +18,21 @@
  *    mapped strongly-ordered); all regions are cache-line aligned so that
  *    cache maintenance of one side's line never touches the other's.
  *  - Little-endian on both sides (ARMv7-A / ARMv7-R / x86-64 host tests).
+ *
+ * Where the region is (the base is the board's, never this header's: the
+ * servo devicetree's amp-region for the firmware, boards/<board>/ for Linux):
+ *
+ *   board          region                   OCM           who else is in OCM
+ *   zynq7000_qemu  0xFFFF0000 + 0x8000      0xFFFC0000    the boot stub and
+ *                                           + 256 KiB     park loop, the stop
+ *                                                         words, CPU1's boot
+ *                                                         register
+ *   zynqmp_qemu    0xFFFC0000 + 0x8000      0xFFFC0000    nothing (TF-A is in
+ *                                           + 256 KiB     DDR); 0xFFFF0000 is
+ *                                                         the R5's high vectors
+ *
+ * Both cores map it non-cacheable (the A9's MMU, the R5's MPU:
+ * AMP_CFG_OCM_CACHED=0).
  */
 #ifndef AMP_OCM_LAYOUT_H
 #define AMP_OCM_LAYOUT_H

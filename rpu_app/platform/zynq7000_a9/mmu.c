@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * mmu.c - flat (VA == PA) first-level section map and cache enable.
+ * mmu.c - the A9 platform's memory protection (memprot.h): a flat
+ * (VA == PA) first-level section map and cache enable.
  *
  * The map is generated from the devicetree (BOARD_MMU_REGIONS): only the
  * regions the firmware uses are mapped; everything else faults, so a stray
@@ -36,7 +37,7 @@
 
 #include "arch.h"
 #include "board.h"
-#include "mmu.h"
+#include "memprot.h"
 
 #define SECTION_SHIFT 20
 #define L1_ENTRIES    4096u
@@ -131,22 +132,27 @@ static void map_stack_guard(void)
 	l1_table[sec] = (uint32_t)(uintptr_t)l2_guard_table | PT_L1_COARSE;
 }
 
-uint32_t mmu_stack_guard_start(void)
+uint32_t memprot_stack_guard_start(void)
 {
 	return (uint32_t)(uintptr_t)__stack_guard_start;
 }
 
-uint32_t mmu_stack_guard_end(void)
+uint32_t memprot_stack_guard_end(void)
 {
 	return (uint32_t)(uintptr_t)__stack_guard_end;
 }
 
-int mmu_enabled(void)
+const char *memprot_describe(void)
+{
+	return "on (L1 I+D, carveout inner-WB, OCM/trace non-cacheable)";
+}
+
+int memprot_enabled(void)
 {
 	return (CP15_READ(0, c1, c0, 0) & SCTLR_M) != 0;
 }
 
-void mmu_init(void)
+void memprot_init(void)
 {
 	uint32_t sctlr;
 

@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 #include "arch.h"
 #include "board.h"
-#include "gtimer.h"
+#include "timebase.h"
 
 #define GT_COUNTER_LO 0x00u
 #define GT_COUNTER_HI 0x04u
@@ -11,7 +11,7 @@
 
 static uint32_t mult;	/* prescaler + 1 */
 
-int gtimer_init(uint32_t *prescaler)
+int timebase_init(uint32_t *prescaler)
 {
 	uint32_t c = mmio_read32(BOARD_GTIMER_BASE + GT_CONTROL);
 
@@ -20,12 +20,12 @@ int gtimer_init(uint32_t *prescaler)
 	return (c & GT_ENABLE) ? 0 : 1;
 }
 
-int gtimer_changed(void)
+int timebase_changed(void)
 {
 	return GT_PRESCALER(mmio_read32(BOARD_GTIMER_BASE + GT_CONTROL)) + 1u != mult;
 }
 
-uint64_t gtimer_now(void)
+uint64_t timebase_now(void)
 {
 	uint32_t hi, lo, hi2;
 
@@ -37,7 +37,7 @@ uint64_t gtimer_now(void)
 	return (((uint64_t)hi << 32) | lo) * mult;
 }
 
-uint32_t gtimer_now32(void)
+uint32_t timebase_now32(void)
 {
 	/* low 32 bits of a product depend only on the low 32 bits */
 	return mmio_read32(BOARD_GTIMER_BASE + GT_COUNTER_LO) * mult;
@@ -46,5 +46,5 @@ uint32_t gtimer_now32(void)
 /* amp_lib bare-metal port hook (AMP_BOARD_TICKS_PER_US in board.h). */
 uint32_t amp_board_ticks(void)
 {
-	return gtimer_now32();
+	return timebase_now32();
 }
