@@ -201,7 +201,7 @@ static int open_devices(struct servod *sd)
 		return 1;
 	}
 	if (rproc_find(&sd->rproc))
-		logm(sd, "no remoteproc named servo-cpu1 yet");
+		logm(sd, "no remoteproc yet (the one the OCM mailbox's devicetree node names, or %s)", RPROC_NAME);
 	return 0;
 }
 

@@ -1,10 +1,16 @@
 /* SPDX-License-Identifier: MIT */
 /*
- * rproc.h - the servo core's remoteproc instance in sysfs (the one named
- * "servo-cpu1"): its state (read, and written: start, stop), its recovery
- * setting, the driver's report_crash attribute
- * (docs/ABI/sysfs-servoamp-remoteproc) and the firmware's trace buffer in
- * debugfs.
+ * rproc.h - the servo core's remoteproc instance in sysfs: its state
+ * (read, and written: start, stop), its recovery setting, the driver's
+ * report_crash attribute (docs/ABI/sysfs-servoamp-remoteproc; servoamp's
+ * Zynq-7000 driver only) and the firmware's trace buffer in debugfs.
+ *
+ * Which instance: the one the OCM mailbox's devicetree node names
+ * (servoamp,remoteproc = <&its node>, devicetree/bindings/sram/
+ * servoamp,ocm-mailbox.yaml), found through the phandles under
+ * /sys/class/{uio,remoteproc}/.../of_node; without that property, the one
+ * named RPROC_NAME. So servod needs no board's name: the Zynq-7000's
+ * "servo-cpu1" and the ZynqMP's upstream "ffe00000.r5f" are both found.
  */
 #ifndef SERVOD_RPROC_H
 #define SERVOD_RPROC_H
@@ -12,13 +18,15 @@
 #include <stddef.h>
 
 #define RPROC_NAME "servo-cpu1"
+#define RPROC_MAILBOX_UIO "ocm-mailbox"	/* the UIO device of amp_lib's region */
 
 struct rproc {
 	char dir[300];		/* /sys/class/remoteproc/remoteprocN, "" until found */
 	char state[32];		/* the last state read (rproc_state()) */
 };
 
-/* The one lookup: the entry ("remoteprocN") whose name is RPROC_NAME. 0 or -1. */
+/* The one lookup: the entry ("remoteprocN") the mailbox names (or named
+ * RPROC_NAME). 0 or -1. */
 int rproc_lookup(char *entry, size_t n);
 /* rp->dir from the lookup: 0, or -1 (not there yet). */
 int rproc_find(struct rproc *rp);

@@ -88,7 +88,15 @@ def test_linux_dt_matches_board_yaml(board: qemu.Board, images: qemu.Images, var
     dtb = qemu.build_dtb(board, qemu.kernel_source(images.kernel.parent), out_dir=tmp_path,
                          dts_variant=variant)
     assert cells(fdtget(dtb, "/memory@0", "reg")) == [board.addr("ddr", "base"), board.addr("ddr", "size")]
-    assert cells(fdtget(dtb, "/axi/sram@fffc0000", "reg")) == [board.addr("ocm", "base"), board.addr("ocm", "size")]
+    # amp_lib's region, mapped to servod through UIO, names the remoteproc
+    # of the core on its other side (servod finds it by that phandle)
+    mbox = f"/axi/ocm-mailbox@{board.addr('servo', 'mailbox', 'base'):x}"
+    assert cells(fdtget(dtb, mbox, "reg")) == [board.addr("servo", "mailbox", "base"),
+                                                board.addr("servo", "mailbox", "size")]
+    assert fdtget(dtb, mbox, "compatible", "s") == "servoamp,ocm-mailbox generic-uio"
+    assert fdtget(dtb, mbox, "servoamp,remoteproc") == fdtget(dtb, "/remoteproc@ffe00000/r5f@0", "phandle")
+    ocm = board.addr("ocm", "base")
+    assert ocm <= board.addr("servo", "mailbox", "base") < ocm + board.addr("ocm", "size")
     assert cells(fdtget(dtb, "/axi/interrupt-controller@f9010000", "reg"))[0:3:2] == [
         board.addr("gic", "dist"), board.addr("gic", "cpu")]
     u0 = board.qemu["uarts"][0]
