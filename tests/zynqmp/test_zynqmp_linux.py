@@ -15,6 +15,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Literal
 
 import pytest
 
@@ -39,8 +40,8 @@ def elf_header(path: Path) -> tuple[int, int, int, bool]:
     """(ELF class, e_type, e_machine, has a PT_INTERP: dynamically linked)."""
     data = path.read_bytes()
     assert data[:4] == b"\x7fELF", f"{path}: not an ELF file"
-    cls, little = data[4], data[5] == 1
-    order = "little" if little else "big"
+    cls = data[4]
+    order: Literal["little", "big"] = "little" if data[5] == 1 else "big"
 
     def word(off: int, size: int) -> int:
         return int.from_bytes(data[off:off + size], order)
@@ -200,7 +201,8 @@ def test_servod_ampctl_and_the_uio_module_on_the_a53(board: qemu.Board) -> None:
         assert rc == 0 and out.endswith("(O)"), out
         rc, out = sh("dmesg | grep -i -e cycle.uio -e taint")
         lines = out.splitlines()
-        assert len(lines) == 1 and lines[0].endswith("servoamp_cycle_uio: loading out-of-tree module taints kernel."), out
+        taint_note = "servoamp_cycle_uio: loading out-of-tree module taints kernel."
+        assert len(lines) == 1 and lines[0].endswith(taint_note), out
         assert sh("cat /proc/sys/kernel/tainted") == (0, str(TAINT_OOT_MODULE))
 
         drv = "/sys/bus/platform/drivers/servoamp-cycle-uio"
