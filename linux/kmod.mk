@@ -13,17 +13,23 @@
 #
 # KDIR is the kernel's O= build tree (linux/kernel/build.sh prepares it and
 # links it as build/kernel-rt, the board's kernel; build/kernel for
-# --variant vanilla). The sources are copied to $(BUILD) so that no build
-# output lands in the source tree.
+# --variant vanilla; linux/kernel/build-zynqmp.sh, build/kernel-zynqmp, the
+# ZynqMP's arm64 kernel). The kernel's architecture comes from its info
+# file (arch=, arm when absent), the compiler from that architecture's row
+# of scripts/mk/guest-arch.mk. The sources are copied to $(BUILD) so that
+# no build output lands in the source tree.
 REPO    ?= $(abspath $(CURDIR)/../..)
 KDIR    ?= $(REPO)/build/kernel-rt/obj
 KINFO   := $(KDIR)/../info
 BUILD   ?= $(REPO)/build/linux/$(NAME)/$(shell sed -n 's/^key=//p' $(KINFO))
 KSRC    ?= $(shell sed -n 's/^src=//p' $(KINFO))
-CROSS_COMPILE ?= arm-linux-gnueabihf-
+KARCH   := $(or $(shell sed -n 's/^arch=//p' $(KINFO)),arm)
+GUEST_ARCH = $(call guest_arch_of_karch,$(KARCH))
+include $(REPO)/scripts/mk/guest-arch.mk
+CROSS_COMPILE ?= $(GUEST_CROSS_$(GUEST_ARCH))
 
 all: $(addprefix $(BUILD)/,$(SRCS)) $(addprefix $(BUILD)/include/,$(HDRS))
-	$(MAKE) -C $(KDIR) M=$(BUILD) ARCH=arm CROSS_COMPILE=$(CROSS_COMPILE) modules
+	$(MAKE) -C $(KDIR) M=$(BUILD) ARCH=$(KARCH) CROSS_COMPILE=$(CROSS_COMPILE) modules
 
 $(BUILD)/%: % | $(BUILD)
 	cp $< $@

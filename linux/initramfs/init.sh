@@ -27,10 +27,13 @@ done
 # (docs/cycle.md, "Priorities under PREEMPT_RT"). Linux runs on CPU0 only
 # (maxcpus=1). On the vanilla kernel that thread exists but never runs (the
 # hard interrupt wakes servod): its priority does not matter there.
-# Only where the cycle interrupt's driver is in the initramfs (not yet on
-# the ZynqMP board).
-if [ -e /lib/modules/servoamp_cycle_uio.ko ]; then
+# Only where the cycle interrupt's driver bound a device: the ZynqMP board
+# has the driver but no cycle interrupt in its devicetree yet (issue 35,
+# item 2).
+if ls -d /sys/bus/platform/drivers/servoamp-cycle-uio/*/uio >/dev/null 2>&1; then
 	irqprio cycle-interrupt 81 || echo "servoamp: irqprio cycle-interrupt failed"
+elif [ -e /lib/modules/servoamp_cycle_uio.ko ]; then
+	echo "servoamp: no cycle interrupt in the devicetree (servoamp_cycle_uio bound no device)"
 fi
 
 # PREEMPT_RT prints kernel messages to the console from a kthread, after

@@ -87,6 +87,12 @@ class Board:
         return str(self.linux.get("arch", "arm"))
 
     @property
+    def modules(self) -> list[str]:
+        """The out-of-tree kernel modules the board's initramfs gets
+        (linux.modules: folders of linux/, e.g. ``uio``; none when absent)."""
+        return [str(m) for m in self.linux.get("modules") or []]
+
+    @property
     def boot_flow(self) -> str:
         """How the board starts (board.yaml: qemu: boot): ``stub`` (the Zynq-7000: every
         CPU in the boot stub, which enters the zImage; the default) or

@@ -140,19 +140,25 @@ def build_dtb(board: Board, ksrc: Path, initramfs: Path | None = None, out_dir: 
     return dtb
 
 
-# The out-of-tree modules the board loads: linux/<folder>/ -> its module
+# The out-of-tree modules a board can load (board.yaml linux.modules):
+# linux/<folder>/ -> its module
 KERNEL_MODULES = {"remoteproc": "zynq_servo_rproc.ko", "uio": "servoamp_cycle_uio.ko"}
 
 
-def build_modules(kdir: Path) -> list[Path]:
-    """The out-of-tree modules (linux/kmod.mk; about 1 s each): the
-    remoteproc driver and the cycle interrupt's UIO driver."""
+def build_modules(kdir: Path, folders: Sequence[str] = tuple(KERNEL_MODULES)) -> list[Path]:
+    """The out-of-tree modules of ``folders`` (default: every one; a
+    board's are :attr:`Board.modules`) built against the kernel build
+    ``kdir`` (linux/kmod.mk, which takes the architecture from the kernel's
+    info file; about 1 s each)."""
+    unknown = [f for f in folders if f not in KERNEL_MODULES]
+    if unknown:
+        raise QemuError(f"no kernel module folder {', '.join(unknown)} (have: {', '.join(KERNEL_MODULES)})")
     key = next(l[4:] for l in (kdir / "info").read_text().splitlines() if l.startswith("key="))
     out = []
-    for folder, ko in KERNEL_MODULES.items():
+    for folder in folders:
         build = REPO / "build/linux" / folder / key
         _run(["make", "-s", "-C", REPO / "linux" / folder, f"KDIR={kdir / 'obj'}", f"BUILD={build}"])
-        out.append(build / ko)
+        out.append(build / KERNEL_MODULES[folder])
     return out
 
 
@@ -213,13 +219,31 @@ def rpu_app_firmware(board: Board, build: bool = True) -> list[Path]:
     return found
 
 
-def build_userland() -> list[Path]:
-    """servod and ampctl (linux/servod, static armhf), when their sources exist."""
+# Linux's architecture (Board.arch, the kernel's name) -> the guest's Debian
+# architecture: the initramfs' busybox and the rows of
+# scripts/mk/guest-arch.mk (servod's and motion's builds)
+DEBIAN_ARCH = {"arm": "armhf", "arm64": "arm64"}
+
+
+def guest_arch(board: Board) -> str:
+    """The board's userland architecture in Debian's terms (``armhf``,
+    ``arm64``), from board.yaml's linux.arch."""
+    try:
+        return DEBIAN_ARCH[board.arch]
+    except KeyError:
+        raise QemuError(f"board {board.name}: linux.arch {board.arch!r} is none of {', '.join(DEBIAN_ARCH)}") from None
+
+
+def build_userland(arch: str = "armhf") -> list[Path]:
+    """servod and ampctl (linux/servod, static) for the Debian architecture
+    ``arch`` (:func:`guest_arch`), when their sources exist:
+    build/linux/servod (armhf) or build/linux/servod-<arch>, as
+    linux/servod/Makefile names them."""
     mk = REPO / "linux" / "servod" / "Makefile"
     if not mk.exists():
         return []
-    out = REPO / "build" / "linux" / "servod"
-    _run(["make", "-s", "-C", mk.parent, f"BUILD={out}"])
+    out = REPO / "build" / "linux" / ("servod" if arch == "armhf" else f"servod-{arch}")
+    _run(["make", "-s", "-C", mk.parent, f"GUEST_ARCH={arch}", f"BUILD={out}"])
     return [out / "servod", out / "ampctl"]
 
 
@@ -246,21 +270,17 @@ def prepare_images(
 
     ``firmware``: ELF files for /lib/firmware; default: the board's test
     fixtures (:func:`build_test_firmware`) plus rpu_app's ELF(s) for the
-    board (its servo devicetree picks the platform: the A9 or the R5). ``dts_variant``: see :meth:`Board.dts`.
+    board (its servo devicetree picks the platform: the A9 or the R5).
+    ``dts_variant``: see :meth:`Board.dts`.
     """
+    if firmware is None:
+        firmware = build_test_firmware(board) + (rpu_app_firmware(board) if with_rpu_app else [])
     if board.boot_flow == "tf-a":
-        if firmware is None:
-            firmware = build_test_firmware(board)
-            if with_rpu_app:
-                firmware = list(firmware) + rpu_app_firmware(board)
         return prepare_tf_a_images(board, firmware, dts_variant)
     kdir = kernel_dir()
-    modules = build_modules(kdir)
-    if firmware is None:
-        firmware = build_test_firmware()
-        if with_rpu_app:
-            firmware = list(firmware) + rpu_app_firmware(board)
-    initramfs = build_initramfs(modules, firmware, build_userland())
+    modules = build_modules(kdir, board.modules)
+    arch = guest_arch(board)
+    initramfs = build_initramfs(modules, firmware, build_userland(arch), arch=arch)
     stub = build_stub(board)
     stub_icount = build_stub(board, park_wfe=False)
     dtb = build_dtb(board, kernel_source(kdir), initramfs, dts_variant=dts_variant)
@@ -324,16 +344,15 @@ def build_bl33(board: Board) -> Path:
     return out / "bl33.bin"
 
 
-DEBIAN_ARCH = {"arm": "armhf", "arm64": "arm64"}
-
-
 def prepare_tf_a_images(board: Board, firmware: Sequence[Path] = (), dts_variant: str | None = None) -> Images:
     """The images of a board booted by TF-A (boot flow ``tf-a``): BL31, the
     BL33 stub, the board's kernel (its own build script), the initramfs of
-    the board's architecture (busybox, /init; ``firmware`` in
-    /lib/firmware) and the DTB of ``dts_variant``."""
+    the board's architecture (busybox, /init; servod and ampctl built for
+    it; the board's modules built against its kernel in /lib/modules;
+    ``firmware`` in /lib/firmware) and the DTB of ``dts_variant``."""
     kdir = board_kernel_dir(board)
-    initramfs = build_initramfs([], firmware, [], arch=DEBIAN_ARCH[board.arch])
+    arch = guest_arch(board)
+    initramfs = build_initramfs(build_modules(kdir, board.modules), firmware, build_userland(arch), arch=arch)
     dtb = build_dtb(board, kernel_source(kdir), initramfs, dts_variant=dts_variant)
     dtb_max = board.addr("load", "image") - board.addr("load", "dtb")
     if dtb.stat().st_size > dtb_max:

@@ -39,6 +39,7 @@ from servoamp.images import (
     RPU_APP_VARIANTS,
     Images,
     _run,
+    board_kernel_dir,
     build_bl33,
     build_dtb,
     build_initramfs,
@@ -48,6 +49,7 @@ from servoamp.images import (
     build_tf_a,
     build_userland,
     default_kernel,
+    guest_arch,
     kernel_dir,
     kernel_link,
     kernel_source,
@@ -78,11 +80,11 @@ from servoamp.uart import ANSI, Uart
 from servoamp.vcpu import Symbols, symbolise, vcpu_report
 
 __all__ = [
-    "ANSI", "CAN_BUSES", "CAN_LINK_OPTS", "CLOCKS", "KERNELS", "KERNEL_MODULES", "REPO",
-    "RPU_APP_IMAGES", "RPU_APP_VARIANTS", "Board", "BootTimes", "Images", "QemuError", "QemuMachine",
-    "Qmp", "Symbols", "Uart", "_log", "_run", "boot_args", "boot_to_shell", "build_bl33", "build_dtb",
+    "ANSI", "CAN_BUSES", "CAN_LINK_OPTS", "CLOCKS", "KERNELS", "KERNEL_MODULES", "REPO", "RPU_APP_IMAGES",
+    "RPU_APP_VARIANTS", "Board", "BootTimes", "Images", "QemuError", "QemuMachine", "Qmp", "Symbols",
+    "Uart", "_log", "_run", "board_kernel_dir", "boot_args", "boot_to_shell", "build_bl33", "build_dtb",
     "build_initramfs", "build_modules", "build_stub", "build_test_firmware", "build_tf_a", "build_userland",
-    "can_args", "check_qemu", "clock_args", "connect_unix", "default_clock", "default_kernel",
+    "can_args", "check_qemu", "clock_args", "connect_unix", "default_clock", "default_kernel", "guest_arch",
     "interactive", "iter_word_samples", "kernel_dir", "kernel_link", "kernel_source", "machine_args",
     "prepare_images", "project_qemu", "qemu_args", "rproc_words", "rpu_app_firmware", "run_shell",
     "symbolise", "vcpu_report",
