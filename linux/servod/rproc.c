@@ -32,7 +32,7 @@ static int mailbox_rproc_phandle(uint32_t *ph)
 {
 	char entry[256], path[600];
 
-	if (sysfs_class_find("uio", "uio", RPROC_MAILBOX_UIO, 1, entry, sizeof(entry)))
+	if (sysfs_class_find("uio", "uio", RPROC_MAILBOX_UIO, 0, entry, sizeof(entry)))
 		return -1;
 	snprintf(path, sizeof(path), "/sys/class/uio/%s/device/of_node/servoamp,remoteproc", entry);
 	return of_cell(path, ph);

@@ -18,7 +18,7 @@
 #include <stddef.h>
 
 #define RPROC_NAME "servo-cpu1"
-#define RPROC_MAILBOX_UIO "ocm-mailbox"	/* the UIO device of amp_lib's region */
+#define RPROC_MAILBOX_UIO "ocm-mailbox"	/* the UIO device of amp_lib's region (a name prefix) */
 
 struct rproc {
 	char dir[300];		/* /sys/class/remoteproc/remoteprocN, "" until found */

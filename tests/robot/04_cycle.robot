@@ -18,12 +18,12 @@ Documentation     The cycle end to end on the emulated board, in ONE boot:
 ...               cycles; on the host clock (SERVOAMP_CLOCK=host) misses are
 ...               counted and reported (docs/cycle.md, section 6).
 Resource          resources/servoamp.resource
+Resource          resources/servod.resource
 Suite Setup       Boot Cycle Board
 Suite Teardown    Quit Emulation
 
 *** Variables ***
 ${FW}             rpu_app.elf
-${LOG}            /tmp/servod.log
 ${K}              50
 ${OCM}            0xffff0000
 ${SL_STATE}       0xffff0040
@@ -50,128 +50,9 @@ Boot Cycle Board
     Ampctl    param set wd_limit ${K}
     Ampctl    resume    expected_rc=any
 
-Start Servod
-    # --recovery-limit 0: the suite hangs and crashes the firmware on purpose
-    # more than 3 times a minute; the fault latch has its own test
-    # (tests/robot/test_recovery_board.py)
-    Execute Shell Command    rm -f ${LOG}; (servod --recovery-limit 0 > ${LOG} 2>&1 &)
-    Wait For Servod Log    waiting for the servo
-
 Start Servod Again Expecting Wait
     Execute Shell Command    rm -f ${LOG}; (servod --recovery-limit 0 > ${LOG} 2>&1 &)
     Wait For Servod Log    not attached to this servod
-
-Wait For Servod Log
-    [Documentation]    Wait (guest loop, bounded) until servod's log has ${text}
-    ...    at least ${count} times.
-    [Arguments]    ${text}    ${count}=1    ${tries}=400
-    ${out}=    Execute Shell Command
-    ...    i=0; while [ "$(grep -c "${text}" ${LOG})" -lt ${count} ] && [ $i -lt ${tries} ]; do sleep 0.05; i=$((i+1)); done; grep -c "${text}" ${LOG}    timeout=60 s
-    ${n}=    Convert To Integer    ${out}
-    IF    ${n} < ${count}
-        ${log}=    Execute Shell Command    cat ${LOG}
-        Fail    servod log has ${n} x '${text}', expected ${count}:\n${log}
-    END
-
-Servod Log Count
-    [Arguments]    ${text}
-    ${out}=    Execute Shell Command    grep -c "${text}" ${LOG}    expected_rc=any
-    ${n}=    Convert To Integer    ${out}
-    RETURN    ${n}
-
-Ampctl
-    [Arguments]    ${args}    ${expected_rc}=0
-    ${out}=    Execute Shell Command    ampctl ${args} 2>&1    expected_rc=${expected_rc}
-    RETURN    ${out}
-
-Stats
-    ${out}=    Ampctl    stats
-    ${d}=    Evaluate    {l.split('=', 1)[0]: l.split('=', 1)[1] for l in $out.splitlines() if '=' in l}
-    RETURN    ${d}
-
-Delta
-    [Arguments]    ${a}    ${b}    ${key}
-    ${v}=    Evaluate    int($b['${key}']) - int($a['${key}'])
-    RETURN    ${v}
-
-Exchange Window
-    [Documentation]    Runs the exchange for ${seconds} s of guest time and
-    ...    checks its integrity; returns a dict of the deltas.
-    [Arguments]    ${seconds}
-    ${a}=    Stats
-    Execute Shell Command    sleep ${seconds}    timeout=120 s
-    ${b}=    Stats
-    ${r}=    Create Dictionary
-    FOR    ${key}    IN    linux.cycles    linux.exchanges    linux.missed_irq    linux.fb_fresh    linux.fb_stale
-    ...    linux.fb_torn    linux.fb_missed    linux.fb_invalid    linux.amp_cycle    linux.fb_servo_cycle
-    ...    linux.late    linux.stalls    servo.cycles    servo.missed    servo.cmd_fresh    servo.cmd_stale
-    ...    servo.cmd_torn    servo.cmd_missed    servo.cmd_invalid    servo.linux_cycle
-        ${d}=    Delta    ${a}    ${b}    ${key}
-        Set To Dictionary    ${r}    ${key}    ${d}
-    END
-    Log    window ${seconds} s: ${r}    console=True
-    # integrity: nothing invalid (wrong epoch, reordered, duplicated);
-    # a torn read (the writer lapped a reader descheduled by the host for
-    # more than a period) is detected and discarded by amp_lib: reported,
-    # and bounded
-    Should Be Equal As Integers    ${r}[linux.fb_invalid]    0
-    Should Be Equal As Integers    ${r}[servo.cmd_invalid]    0
-    ${torn}=    Evaluate    ${r}[linux.fb_torn] + ${r}[servo.cmd_torn]
-    Should Be True    ${torn} * 1000 <= ${r}[linux.cycles] + 1000    torn reads ${torn}
-    Should Be Equal As Integers    ${r}[linux.stalls]    0
-    # cycle accounting: every cycle of the common time base is handled or
-    # counted as missed, on each side; both sides agree. Each snapshot reads
-    # servod's counters first, then the servo's through the mailbox: the
-    # cycles servod counted in between (stats.skew_cycles, measured in each
-    # snapshot) bound how far the two halves are apart; a loaded host
-    # stretches that to hundreds of cycles at 250 us. 3 cycles + 0.5 % on
-    # top for a cycle in flight at either end.
-    ${lin}=    Evaluate    ${r}[linux.cycles] + ${r}[linux.missed_irq]
-    ${srv}=    Evaluate    ${r}[servo.cycles] + ${r}[servo.missed]
-    ${skew}=    Evaluate    int($a['stats.skew_cycles']) + int($b['stats.skew_cycles'])
-    ${tol}=    Evaluate    3 + (${lin}) // 200 + ${skew}
-    Should Be True    abs(${lin} - ${srv}) <= ${tol}    time base: linux ${lin} vs servo ${srv} (snapshot skew ${skew} cycles)
-    # records: every command Linux published was consumed or counted as
-    # skipped; every feedback the servo published was read or counted as skipped
-    ${cmd}=    Evaluate    ${r}[servo.cmd_fresh] + ${r}[servo.cmd_missed]
-    Should Be True    abs(${cmd} - ${r}[linux.amp_cycle]) <= ${tol}    commands: consumed+skipped ${cmd} vs published ${r}[linux.amp_cycle]
-    ${fb}=    Evaluate    ${r}[linux.fb_fresh] + ${r}[linux.fb_missed]
-    Should Be True    abs(${fb} - ${r}[linux.fb_servo_cycle]) <= ${tol}    feedback: read+skipped ${fb} vs published ${r}[linux.fb_servo_cycle]
-    # when nothing is missed both sides handled the same cycles, up to the
-    # snapshots' own skew and a cycle in flight
-    ${miss}=    Evaluate    ${r}[linux.missed_irq] + ${r}[servo.missed]
-    IF    ${miss} == 0
-        Should Be True    abs(${r}[linux.cycles] - ${r}[servo.cycles]) <= ${skew} + 1
-        ...    cycles: linux ${r}[linux.cycles] vs servo ${r}[servo.cycles] (snapshot skew ${skew})
-    END
-    IF    '${CLOCK}' == 'virtual'
-        No Cycle Missed    ${r}    ${skew}
-    END
-    RETURN    ${r}
-
-No Cycle Missed
-    [Documentation]    Virtual time: host load cannot delay a core, so no
-    ...    cycle is missed on either side, no record is skipped, and both
-    ...    sides handled the same cycles: the totals differ by no more than
-    ...    the cycles that passed while each snapshot crossed the mailbox.
-    [Arguments]    ${r}    ${skew}
-    Should Be Equal As Integers    ${r}[linux.missed_irq]    0    Linux missed cycles
-    Should Be Equal As Integers    ${r}[servo.missed]    0    servo missed cycles
-    Should Be Equal As Integers    ${r}[servo.cmd_missed]    0    commands skipped by the servo
-    Should Be Equal As Integers    ${r}[linux.fb_missed]    0    feedback skipped by servod
-    Should Be True    abs(${r}[linux.cycles] - ${r}[servo.cycles]) <= ${skew}
-    ...    cycles: linux ${r}[linux.cycles] vs servo ${r}[servo.cycles] (snapshot skew ${skew})
-
-Exchange Should Run
-    [Documentation]    The exchange runs: fresh feedback in most cycles servod
-    ...    handled (a handled cycle whose servo half the host descheduled
-    ...    reads stale feedback, counted), whatever the host's load costs in
-    ...    missed cycles (counted by Exchange Window).
-    [Arguments]    ${r}
-    Should Be True    ${r}[linux.exchanges] > 0
-    Should Be True    ${r}[linux.exchanges] + ${r}[linux.fb_stale] <= ${r}[linux.cycles]
-    Should Be True    2 * ${r}[linux.exchanges] > ${r}[linux.cycles]
-    ...    fresh feedback in ${r}[linux.exchanges] of ${r}[linux.cycles] handled cycles
 
 Servo Line Should Say
     [Arguments]    ${state}    ${fault}
