@@ -25,7 +25,7 @@
 #   qemu/<key>/bin/qemu-system-arm        the install (prefix)
 #   qemu/<key>/bin/qemu-system-aarch64
 #   qemu/<key>/libexec/servoamp/          the qtest binaries (TTC, CAN, canlink,
-#                                         ZynqMP RPU)
+#                                         ZynqMP RPU, upstream's xlnx-can-test)
 #   qemu/<key>/info, build.log, ok        results (ok = complete, the
 #                                         qtests passed)
 #   qemu/<key>/src, build                 patched source and build tree, removed
@@ -75,7 +75,7 @@ config_opts=(
 )
 # ninja targets: the emulators, what `meson install` needs, our qtests
 # (run-regression-test.sh knows which emulator each qtest runs on)
-qtests=(cadence-ttc-test zynq-can-test can-lockstep-test xlnx-zynqmp-rpu-test)
+qtests=(cadence-ttc-test zynq-can-test can-lockstep-test xlnx-zynqmp-rpu-test xlnx-can-test)
 targets=(qemu-system-arm qemu-system-aarch64 trace/trace-events-all "${qtests[@]/#/tests/qtest/}")
 
 log() { printf '[qemu] %s\n' "$*" >&2; }

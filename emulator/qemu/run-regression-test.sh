@@ -5,8 +5,10 @@
 # tests/qtest/zynq-can-test.c), or with --test can-lockstep-test the
 # canlink backend's (patches/0010, tests/qtest/can-lockstep-test.c), or with
 # --test xlnx-zynqmp-rpu-test the ZynqMP RPU's (patches/0014-0023,
-# tests/qtest/xlnx-zynqmp-rpu-test.c; it runs on qemu-system-aarch64, the
-# others on qemu-system-arm).
+# tests/qtest/xlnx-zynqmp-rpu-test.c), or with --test xlnx-can-test
+# upstream's qtest of the ZynqMP's CAN controllers (its status checks
+# adjusted by patches/0011); the xlnx-* ones run on qemu-system-aarch64,
+# the others on qemu-system-arm.
 # Exits 0 when it passes, 1 when it fails,
 # 124 when it times out (the unpatched TTC model livelocks in clock_step, so
 # a hang is the expected failure there).
@@ -20,9 +22,10 @@
 #   emulator/qemu/run-regression-test.sh [DIR] --test zynq-can-test
 #   emulator/qemu/run-regression-test.sh [DIR] --test can-lockstep-test
 #   emulator/qemu/run-regression-test.sh [DIR] --test xlnx-zynqmp-rpu-test
+#   emulator/qemu/run-regression-test.sh [DIR] --test xlnx-can-test
 #
-# Environment: SERVOAMP_QEMU_TEST_TIMEOUT (seconds, default 60; the test takes
-# about 2 s on a fixed QEMU).
+# Environment: SERVOAMP_QEMU_TEST_TIMEOUT (seconds, default 60; the TTC test
+# takes about 2 s on a fixed QEMU, can-lockstep-test about 20 s).
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")" && pwd)
@@ -34,7 +37,7 @@ while [ $# -gt 0 ]; do
 	case $1 in
 	--qemu) qemu=${2:?--qemu needs a path}; shift 2 ;;
 	--test) test=${2:?--test needs a name}; shift 2 ;;
-	-h | --help) sed -n '2,26p' "$0"; exit 0 ;;
+	-h | --help) sed -n '2,28p' "$0"; exit 0 ;;
 	*) [ -z "$dir" ] || die "one directory only"; dir=$1; shift ;;
 	esac
 done
@@ -43,11 +46,11 @@ dir=$(cd "$dir" && pwd)
 
 test_bin=""
 case $test in
-*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test, can-lockstep-test, xlnx-zynqmp-rpu-test)" ;;
+*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test, can-lockstep-test, xlnx-zynqmp-rpu-test, xlnx-can-test)" ;;
 esac
 # the emulator a qtest runs on: the ZynqMP's need qemu-system-aarch64
 case $test in
-xlnx-zynqmp-*) emu=qemu-system-aarch64 ;;
+xlnx-*) emu=qemu-system-aarch64 ;;
 *) emu=qemu-system-arm ;;
 esac
 for t in "$dir/libexec/servoamp/$test" "$dir/tests/qtest/$test"; do

@@ -12,7 +12,9 @@ A :class:`Link` connects to the Unix socket QEMU listens on, says HELLO
 does; ``listen`` for one held like it that answers nothing and gets only the
 frames no client destroyed), and then reads FRAME records (and ERROR, for a
 frame destroyed by a bus error); an active client answers a frame with its
-own FRAMEs and ends it with DONE(seq), a listener with DONE alone. Every record read is checked
+own FRAMEs, each carrying that ``seq`` (so QEMU charges them to that frame
+and no other), and ends it with DONE(seq), a listener with DONE alone; a
+FRAME with ``seq`` 0 is a frame outside an exchange. Every record read is checked
 (:func:`unpack`): an unknown type, a dlc over 8, an identifier over its range
 or nonzero reserved fields raise :class:`ProtocolError`.
 
@@ -298,6 +300,14 @@ class Link:
     :meth:`recv` returns the next FRAME or BYE record (``None`` on timeout;
     :class:`ProtocolError` when QEMU closed the socket). :meth:`send_frame`
     and :meth:`done` may be called from another thread than :meth:`recv`.
+
+    An active client's frames sent after :meth:`recv` returned a guest frame
+    (a FRAME that is not INFO) and before its :meth:`done` are that frame's
+    answers: they carry its ``seq``. Frames sent at any other time (after an
+    INFO frame: an answer to another client's frame; from another thread
+    between exchanges) carry ``seq`` 0: frames outside an exchange, which
+    QEMU queues for the bus as it reads them and never charges to a guest
+    frame (docs/canlink.md, "The exchange").
     """
 
     def __init__(self, sock: socket.socket, active: bool, listen: bool = False) -> None:
@@ -310,6 +320,7 @@ class Link:
         self._buf = bytearray()
         self._pending: list[Record] = []
         self._wlock = threading.Lock()
+        self._answering = 0     # seq of the guest frame being answered, 0: none
 
     @classmethod
     def connect(cls, path: str, active: bool = False, name: str = "",
@@ -378,32 +389,40 @@ class Link:
         ``seq``, and ``t_ns`` = the end of the error frame) or BYE from QEMU
         (a DONE or HELLO is a protocol error); None if ``timeout`` seconds
         passed first."""
-        if self._pending:
-            return self._pending.pop(0)
-        rec = self._read(timeout)
+        rec = self._pending.pop(0) if self._pending else self._read(timeout)
         if rec is not None and rec.type not in (FRAME, BYE, ERROR):
             raise ProtocolError(f"unexpected record type {rec.type} from QEMU")
         if rec is not None and rec.type == BYE:
             self.closed = True
+        if rec is not None:
+            # frames sent from now on answer this record: a guest frame
+            # (its seq), or an INFO frame or ERROR (frames outside an exchange)
+            self._answering = rec.seq if rec.type == FRAME and not rec.info and self.active else 0
         return rec
 
     def send_frame(self, can_id: int, data: bytes = b"", eff: bool = False,
-                   rtr: bool = False, dlc: int | None = None, t_ns: int = 0) -> None:
-        """Put a frame on the bus: as the answer to the frame being handled
-        (active client, before its DONE) or as a frame outside an exchange.
-        ``t_ns`` is the earliest guest time it may start (0: none). A
-        listener may not send (QEMU would close the link)."""
+                   rtr: bool = False, dlc: int | None = None, t_ns: int = 0,
+                   seq: int | None = None) -> None:
+        """Put a frame on the bus: as an answer to the guest frame being
+        handled (active client, between :meth:`recv` returning it and its
+        :meth:`done`: ``seq`` defaults to that frame's) or as a frame outside
+        an exchange (``seq`` 0, the default at any other time). ``t_ns`` is
+        the earliest guest time it may start (0: none). A listener may not
+        send (QEMU would close the link)."""
         if self.listen:
             raise ProtocolError("a listener sends no frames")
         n = len(data) if dlc is None else dlc
         self._send(Record(FRAME, (FLAG_EFF if eff else 0) | (FLAG_RTR if rtr else 0),
-                          n, can_id, t_ns, b"" if rtr else bytes(data), 0))
+                          n, can_id, t_ns, b"" if rtr else bytes(data),
+                          self._answering if seq is None else seq))
 
     def done(self, seq: int, error: bool = False) -> None:
         """End the exchange of frame ``seq``; ``error``: this client destroys
         it with a bus error (it models a fault on the bus: the sending
         controller counts the error and retransmits, every client gets
         ERROR, the answers to it are dropped)."""
+        if self._answering == seq:
+            self._answering = 0
         self._send(Record(DONE, DONE_ERROR if error else 0, seq=seq))
 
     def close(self) -> None:

@@ -161,6 +161,33 @@ def test_active_bus_sends_done_when_the_application_reads_again(peer: Peer, tmp_
     assert peer.read().type == BYE
 
 
+def test_answers_carry_the_seq_of_their_frame(peer: Peer, tmp_path: Path) -> None:
+    """docs/canlink.md: an active client's frames sent between a guest
+    frame and its DONE carry that frame's seq (its answers, charged to it);
+    any other frame, such as an answer to an INFO frame, carries 0 (outside
+    an exchange: QEMU never charges it to a guest frame)."""
+    link = canlink.Link.connect(str(tmp_path / "can.sock"), active=True, name="drive")
+    try:
+        assert peer.ready.wait(5)
+        link.send_frame(0x701, b"\x00")                          # boot-up
+        assert peer.read().seq == 0
+        peer.write(Record(FRAME, 0, 0, 0x080, 1000, b"", 41))
+        assert link.recv(5) is not None
+        link.send_frame(0x181, b"\x01")
+        link.send_frame(0x182, b"\x02", seq=0)                   # explicitly outside
+        link.done(41)
+        assert [(r.can_id, r.type, r.seq) for r in (peer.read(), peer.read(), peer.read())] == \
+            [(0x181, FRAME, 41), (0x182, FRAME, 0), (0, DONE, 41)]
+        link.send_frame(0x183, b"\x03")                          # after the DONE
+        assert peer.read().seq == 0
+        peer.write(Record(FRAME, canlink.FLAG_INFO, 0, 0x080, 2000, b"", 0))
+        assert link.recv(5) is not None
+        link.send_frame(0x184, b"\x04")                          # answers an INFO frame
+        assert peer.read().seq == 0
+    finally:
+        link.close()
+
+
 def test_a_destroyed_frame_is_an_error_frame_and_owes_no_done(peer: Peer, tmp_path: Path) -> None:
     with can.Bus(interface="servoamp", channel=str(tmp_path / "can.sock"), active=True) as bus:
         assert peer.ready.wait(5)
