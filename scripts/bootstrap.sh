@@ -37,9 +37,11 @@ apt_board=(gcc-arm-linux-gnueabihf binutils-arm-linux-gnueabihf
 	libelf-dev cpio xz-utils kmod python3-minimal libc6-dev-armhf-cross
 	gcc-aarch64-linux-gnu binutils-aarch64-linux-gnu libc6-dev-arm64-cross
 	linux-source-6.12 dpkg-dev)
-# From bookworm-backports: Debian's qemu-system-aarch64 (10.0.2) for the
-# ZynqMP board (boards/zynqmp_qemu) until emulator/qemu/build.sh builds the
-# aarch64 target; python/servoamp/runner.py prefers our build when it has one.
+# From bookworm-backports: Debian's qemu-system-aarch64 (10.0.2, upstream,
+# without our patches): python/servoamp/runner.py uses it only when our
+# build (emulator/qemu/build.sh, which makes the same binary with the
+# patches) has none, and says so; and it is the unpatched QEMU the docs
+# compare against.
 apt_board_bpo=(qemu-system-arm)
 
 missing=()

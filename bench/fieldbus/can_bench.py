@@ -407,7 +407,7 @@ def main(argv: list[str] | None = None) -> int:
     from servoamp import qemu
 
     if not os.environ.get("SERVOAMP_QEMU"):
-        os.environ["SERVOAMP_QEMU"] = str(qemu.project_qemu() / "bin" / "qemu-system-arm")
+        os.environ["SERVOAMP_QEMU"] = str(qemu.project_qemu() / "bin" / qemu.QEMU_ANY_BOARD)
     rates = parse_range(args.rates)
     drives = parse_range(args.drives)
     args.build_dir.mkdir(parents=True, exist_ok=True)

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# Build servoamp's own qemu-system-arm and qemu-system-aarch64 10.0.2
+# Build servoamp's own qemu-system-aarch64 10.0.2
 # (Debian's source, with the patches in patches/: a Cadence TTC fix so the
 # Zynq-7000 board runs under -icount without livelocking, the ZynqMP's RPU,
 # and the other fixes and features README.md lists, with their qtests).
-# qemu-system-arm runs the Zynq-7000 (xilinx-zynq-a9), qemu-system-aarch64
-# the ZynqMP (xlnx-zcu102) and the Zynq-7000 as well.
+# One emulator for both boards: qemu-system-aarch64 has every Arm machine,
+# the Zynq-7000 (xilinx-zynq-a9) as well as the ZynqMP (xlnx-zcu102).
 #
 #   emulator/qemu/build.sh            # build or reuse the cached QEMU
 #   emulator/qemu/build.sh --print    # same, then print the install directory
@@ -22,8 +22,7 @@
 # Cache: ${SERVOAMP_CACHE:-$HOME/.cache/servoamp}/
 #   qemu-src/qemu_10.0.2+ds.orig.tar.xz   downloaded once (shared)
 #   qemu-src/apt/                         the private APT state
-#   qemu/<key>/bin/qemu-system-arm        the install (prefix)
-#   qemu/<key>/bin/qemu-system-aarch64
+#   qemu/<key>/bin/qemu-system-aarch64    the install (prefix)
 #   qemu/<key>/libexec/servoamp/          the qtest binaries (TTC, CAN, canlink,
 #                                         ZynqMP RPU, upstream's xlnx-can-test)
 #   qemu/<key>/info, build.log, ok        results (ok = complete, the
@@ -59,7 +58,7 @@ python=/usr/bin/python3
 
 # configure options (the prefix is added below; it depends on the key)
 config_opts=(
-	--target-list=arm-softmmu,aarch64-softmmu
+	--target-list=aarch64-softmmu
 	--python=$python
 	--disable-download
 	--without-default-features
@@ -76,7 +75,7 @@ config_opts=(
 # ninja targets: the emulators, what `meson install` needs, our qtests
 # (run-regression-test.sh knows which emulator each qtest runs on)
 qtests=(cadence-ttc-test zynq-can-test can-lockstep-test xlnx-zynqmp-rpu-test xlnx-can-test)
-targets=(qemu-system-arm qemu-system-aarch64 trace/trace-events-all "${qtests[@]/#/tests/qtest/}")
+targets=(qemu-system-aarch64 trace/trace-events-all "${qtests[@]/#/tests/qtest/}")
 
 log() { printf '[qemu] %s\n' "$*" >&2; }
 die() { printf '[qemu] error: %s\n' "$*" >&2; exit 1; }
@@ -188,7 +187,7 @@ prepare_tree() {
 
 	# The "+ds" tarball has no prebuilt firmware (pc-bios/*.bz2, *.bin).
 	# QEMU's meson.build lists the edk2 images as inputs of build targets
-	# whenever bzip2 is installed and an edk2 target (arm-softmmu is one)
+	# whenever bzip2 is installed and an edk2 target (aarch64-softmmu is one)
 	# is configured: give it empty compressed stand-ins. They are never
 	# installed (--disable-install-blobs); these boards need no firmware.
 	local f
@@ -235,12 +234,10 @@ printf '== meson install\n' >>"$buildlog"
 for t in "${qtests[@]}"; do
 	install -D -m 0755 "$out/build/tests/qtest/$t" "$out/libexec/servoamp/$t"
 done
-for arch in arm aarch64; do
-	"$out/bin/qemu-system-$arch" --version | head -1 | grep -q "version $version" ||
-		die "$out/bin/qemu-system-$arch does not run"
-	"$out/bin/qemu-system-$arch" -M none -netdev help | grep -qx user ||
-		die "qemu-system-$arch was built without slirp (user networking)"
-done
+"$out/bin/qemu-system-aarch64" --version | head -1 | grep -q "version $version" ||
+	die "$out/bin/qemu-system-aarch64 does not run"
+"$out/bin/qemu-system-aarch64" -M none -netdev help | grep -qx user ||
+	die "qemu-system-aarch64 was built without slirp (user networking)"
 "$out/bin/qemu-system-aarch64" -M help | grep -q '^xlnx-zcu102 ' || die "qemu-system-aarch64 has no xlnx-zcu102"
 "$out/bin/qemu-system-aarch64" -M help | grep -q '^xilinx-zynq-a9 ' || die "qemu-system-aarch64 has no xilinx-zynq-a9"
 for t in "${qtests[@]}"; do
@@ -276,5 +273,5 @@ touch "$out/ok"
 ls -td "$cache"/qemu/*/ | tail -n +$((${SERVOAMP_KEEP:-2} + 1)) | while read -r d; do
 	[ "${d%/}" = "$out" ] || rm -rf "${d%/}"
 done
-log "built in $secs s: $out/bin/qemu-system-arm, qemu-system-aarch64 (disk: source $du_src MB, build $du_build MB, install $((du_total - du_src - du_build)) MB)"
+log "built in $secs s: $out/bin/qemu-system-aarch64 (disk: source $du_src MB, build $du_build MB, install $((du_total - du_src - du_build)) MB)"
 publish

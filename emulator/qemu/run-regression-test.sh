@@ -7,8 +7,8 @@
 # --test xlnx-zynqmp-rpu-test the ZynqMP RPU's (patches/0014-0023,
 # tests/qtest/xlnx-zynqmp-rpu-test.c), or with --test xlnx-can-test
 # upstream's qtest of the ZynqMP's CAN controllers (its status checks
-# adjusted by patches/0011); the xlnx-* ones run on qemu-system-aarch64,
-# the others on qemu-system-arm.
+# adjusted by patches/0011); all on qemu-system-aarch64, the one emulator
+# of both boards (patches/0026 registers the Zynq-7000 tests for it).
 # Exits 0 when it passes, 1 when it fails,
 # 124 when it times out (the unpatched TTC model livelocks in clock_step, so
 # a hang is the expected failure there).
@@ -18,7 +18,7 @@
 #                                                         # or a QEMU build dir (SERVOAMP_QEMU_KEEP_BUILD=1)
 #   emulator/qemu/run-regression-test.sh DIR --qemu BIN   # DIR's test binary against another
 #                                                         # QEMU, e.g. Debian's unpatched
-#                                                         # /usr/bin/qemu-system-arm (same 10.0.2)
+#                                                         # /usr/bin/qemu-system-aarch64 (same 10.0.2)
 #   emulator/qemu/run-regression-test.sh [DIR] --test zynq-can-test
 #   emulator/qemu/run-regression-test.sh [DIR] --test can-lockstep-test
 #   emulator/qemu/run-regression-test.sh [DIR] --test xlnx-zynqmp-rpu-test
@@ -48,11 +48,8 @@ test_bin=""
 case $test in
 */* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test, can-lockstep-test, xlnx-zynqmp-rpu-test, xlnx-can-test)" ;;
 esac
-# the emulator a qtest runs on: the ZynqMP's need qemu-system-aarch64
-case $test in
-xlnx-*) emu=qemu-system-aarch64 ;;
-*) emu=qemu-system-arm ;;
-esac
+# the emulator every qtest runs on (both boards' machines are in it)
+emu=qemu-system-aarch64
 for t in "$dir/libexec/servoamp/$test" "$dir/tests/qtest/$test"; do
 	[ -x "$t" ] && { test_bin=$t; break; }
 done

@@ -61,6 +61,7 @@ from servoamp.runner import (
     CAN_BUSES,
     CAN_LINK_OPTS,
     CLOCKS,
+    QEMU_ANY_BOARD,
     BootTimes,
     QemuMachine,
     boot_args,
@@ -81,7 +82,8 @@ from servoamp.vcpu import Symbols, symbolise, vcpu_report
 
 __all__ = [
     "ANSI", "CAN_BUSES", "CAN_LINK_OPTS", "CLOCKS", "KERNELS", "KERNEL_MODULES", "REPO", "RPU_APP_IMAGES",
-    "RPU_APP_VARIANTS", "Board", "BootTimes", "Images", "QemuError", "QemuMachine", "Qmp", "Symbols",
+    "RPU_APP_VARIANTS", "Board", "BootTimes", "Images", "QEMU_ANY_BOARD", "QemuError", "QemuMachine", "Qmp",
+    "Symbols",
     "Uart", "_log", "_run", "board_kernel_dir", "boot_args", "boot_to_shell", "build_bl33", "build_dtb",
     "build_initramfs", "build_modules", "build_stub", "build_test_firmware", "build_tf_a", "build_userland",
     "can_args", "check_qemu", "clock_args", "connect_unix", "default_clock", "default_kernel", "guest_arch",

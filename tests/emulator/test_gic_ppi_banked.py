@@ -12,7 +12,7 @@ and was still pending, it was lost, and no new edge ever came.
 A bare-metal program on both CPUs (fixtures/gic_ppi_pending.S) shows it
 without Linux: CPU0 sets its PPI 29 pending, CPU1 sets and clears its own,
 CPU0 reads its own again. Red on the unpatched build (the bit is gone),
-green on ours. ``SERVOAMP_QEMU=/path/to/qemu-system-arm`` runs it against
+green on ours. ``SERVOAMP_QEMU=/path/to/qemu-system-aarch64`` runs it against
 another build.
 """
 

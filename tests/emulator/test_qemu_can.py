@@ -28,7 +28,7 @@ operating mode where the test expected the old model's 0; 0011 adjusts
 that expectation and nothing else.
 
 Showing the red run needs a build without patch 0007 (emulator/qemu/
-README.md says how). ``SERVOAMP_QEMU=/path/to/qemu-system-arm`` is not
+README.md says how). ``SERVOAMP_QEMU=/path/to/qemu-system-aarch64`` is not
 used here: run-regression-test.sh --qemu BIN runs the test against another
 binary.
 """
@@ -81,7 +81,7 @@ def test_board_machine_has_both_can_controllers() -> None:
     """The board's machine, as the launcher starts it, maps the two CANPS
     controllers (QEMU's type xlnx.zynqmp-can) where the unimplemented
     placeholders were, and takes the canbus0/canbus1 link properties."""
-    binary = qemu.project_qemu() / "bin" / "qemu-system-arm"
+    binary = qemu.project_qemu() / "bin" / qemu.QEMU_ANY_BOARD
     res = subprocess.run([str(binary), "-M", "xilinx-zynq-a9,canbus0=bus,canbus1=bus",
                           "-object", "can-bus,id=bus", "-display", "none", "-S",
                           "-monitor", "stdio", "-serial", "null", "-nodefaults"],

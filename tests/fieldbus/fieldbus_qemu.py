@@ -39,7 +39,7 @@ def qemu_binary() -> str:
     binary = os.environ.get("SERVOAMP_QEMU")
     if not binary:
         from servoamp import qemu
-        binary = str(qemu.project_qemu() / "bin" / "qemu-system-arm")
+        binary = str(qemu.project_qemu() / "bin" / qemu.QEMU_ANY_BOARD)
     if not os.access(binary, os.X_OK):
         pytest.skip(f"{binary}: no QEMU")
     out = subprocess.run([binary, "-object", "help"], capture_output=True, text=True, timeout=60).stdout

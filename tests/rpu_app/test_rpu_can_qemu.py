@@ -37,7 +37,7 @@ def canlink_qemu() -> str:
     """The QEMU binary with the canlink backend, or skip."""
     from servoamp import qemu
 
-    binary = os.environ.get("SERVOAMP_QEMU") or str(qemu.project_qemu() / "bin" / "qemu-system-arm")
+    binary = os.environ.get("SERVOAMP_QEMU") or str(qemu.project_qemu() / "bin" / qemu.QEMU_ANY_BOARD)
     if not os.access(binary, os.X_OK):
         pytest.skip(f"{binary}: no QEMU")
     out = subprocess.run([binary, "-object", "help"], capture_output=True, text=True, timeout=60).stdout
