@@ -16,6 +16,7 @@ from typing import Iterator
 import can
 import pytest
 
+from fieldbus_helpers import Peer
 from servoamp import canlink
 from servoamp.canlink import BYE, DONE, ERROR, FRAME, HELLO, ProtocolError, Record
 
@@ -66,55 +67,6 @@ def test_bad_records_are_refused(mutate, why) -> None:  # type: ignore[no-untype
         canlink.unpack(bytes(raw))
     with pytest.raises(ProtocolError):
         canlink.unpack(bytes(raw[:31]))
-
-
-class Peer:
-    """QEMU's side of one connection, as docs/canlink.md has it."""
-
-    def __init__(self, path: Path) -> None:
-        self.srv = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self.srv.bind(str(path))
-        self.srv.listen(4)
-        self.conn: socket.socket | None = None
-        self.hello: Record | None = None
-        self.ready = threading.Event()
-        threading.Thread(target=self._accept, daemon=True).start()
-
-    def _accept(self) -> None:
-        self.conn, _ = self.srv.accept()
-        self.hello = self.read()
-        self.write(Record(HELLO, can_id=500_000, t_ns=777))
-        self.ready.set()
-
-    def read(self) -> Record:
-        assert self.conn is not None
-        buf = b""
-        while len(buf) < 32:
-            chunk = self.conn.recv(32 - len(buf))
-            assert chunk
-            buf += chunk
-        return canlink.unpack(buf)
-
-    def write(self, rec: Record) -> None:
-        assert self.conn is not None
-        self.conn.sendall(canlink.pack(rec))
-
-    def pending(self, timeout: float = 0.2) -> bool:
-        assert self.conn is not None
-        self.conn.settimeout(timeout)
-        try:
-            return bool(self.conn.recv(1, socket.MSG_PEEK))
-        except TimeoutError:
-            return False
-        finally:
-            self.conn.settimeout(None)
-
-
-@pytest.fixture
-def peer(tmp_path: Path) -> Iterator[Peer]:
-    p = Peer(tmp_path / "can.sock")
-    yield p
-    p.srv.close()
 
 
 def test_the_interface_is_registered() -> None:

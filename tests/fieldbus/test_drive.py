@@ -10,52 +10,13 @@ import struct
 
 import pytest
 
-from fieldbus_helpers import (NMT_PRE_OP, NMT_RESET_NODE, NMT_START, NMT_STOP, emcy, nmt, rpdo1,
-                              sdo_download, sdo_response, sdo_upload, tpdo1)
+from fieldbus_helpers import (MS, NODE, NMT_PRE_OP, NMT_RESET_NODE, NMT_START, NMT_STOP, Bench, emcy,
+                              nmt, rpdo1, sdo_download, sdo_response, sdo_upload, tpdo1)
 from servoamp.drivesim import cia402
 from servoamp.drivesim.cia402 import State
 from servoamp.drivesim.drive import Drive, FaultKind, Frame, Injection, parse_reset_cycles
 from servoamp.drivesim.model import Motor
 
-MS = 1_000_000
-NODE = 3
-
-
-class Bench:
-    """One drive and a guest clock."""
-
-    def __init__(self, faults: list[Injection] | None = None, node: int = NODE,
-                 fault_reset_cycles: int | None = 0) -> None:
-        self.drive = Drive(node, faults=faults or [], fault_reset_cycles=fault_reset_cycles)
-        self.node = node
-        self.t = 0
-        self.boot = self.drive.boot(0)
-
-    def send(self, frame: tuple[int, bytes], dt_ns: int = 100_000) -> list[Frame]:
-        self.t += dt_ns
-        return self.drive.on_frame(frame[0], frame[1], self.t)
-
-    def sdo(self, frame: tuple[int, bytes]) -> tuple[str, int, int, int]:
-        out = [f for f in self.send(frame) if f.can_id == 0x580 + self.node]
-        assert len(out) == 1, out
-        return sdo_response(out[0].data)
-
-    def cycle(self, cw: int, target: int) -> tuple[int, int, list[Frame]]:
-        """RPDO then SYNC 1 ms after the last SYNC: (statusword, position, all frames)."""
-        out = self.send(rpdo1(self.node, cw, target), 50_000)
-        out += self.send((0x080, b""), 950_000)
-        tp = [f for f in out if f.can_id == 0x180 + self.node]
-        assert len(tp) == 1, out
-        sw, pos = tpdo1(tp[0].data)
-        return sw, pos, out
-
-    def enable(self) -> None:
-        self.send(nmt(NMT_START, self.node))
-        assert self.sdo(sdo_download(self.node, 0x6060, 0, 8, 1))[0] == "download-ok"
-        for cw in (0x06, 0x07, 0x0F):
-            self.cycle(cw, 0)
-        sw, _, _ = self.cycle(0x0F, 0)
-        assert cia402.state_of(sw) == State.OPERATION_ENABLED
 
 
 def test_controlword_transitions() -> None:

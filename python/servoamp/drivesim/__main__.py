@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import select
 import socket
 import sys
 import time
@@ -30,6 +29,23 @@ from pathlib import Path
 
 from servoamp import canlink
 from servoamp.drivesim.drive import EDS, FAULT_ALIASES, Drive, Frame, Injection, parse_reset_cycles
+
+# exit statuses (docs/fieldbus.md)
+EXIT_BYE = 0            # QEMU said BYE (it does when it quits)
+EXIT_CONNECT = 1        # no canlink connection (no socket, no HELLO)
+EXIT_USAGE = 2          # bad options (argparse)
+EXIT_LINK_LOST = 3      # QEMU dropped the simulator: the socket closed without BYE, reset, or a bad record
+
+# the control socket: connections read without waiting, at most this many,
+# each closed when it has sent no whole request line for this long
+CONTROL_MAX_CONNECTIONS = 8
+CONTROL_IDLE_S = 5.0
+CONTROL_LINE_MAX = 256
+
+
+class LinkLost(Exception):
+    """The canlink connection ended without BYE; the message says how, in
+    one line."""
 
 
 def parse_nodes(text: str) -> list[int]:
@@ -116,7 +132,11 @@ class Control:
       fault reset cycles.
 
     Polled once per frame, so it acts only while the bus carries traffic
-    (the master's SYNC every cycle)."""
+    (the master's SYNC every cycle). A poll never waits: it takes what the
+    connections sent so far, answers the whole lines, and closes a
+    connection that sent none in CONTROL_IDLE_S (and the oldest when more
+    than CONTROL_MAX_CONNECTIONS are open), so a silent client costs the
+    lockstep loop nothing."""
 
     def __init__(self, path: str, drives: list[Drive], short: BusShort | None = None) -> None:
         if os.path.exists(path):
@@ -126,8 +146,9 @@ class Control:
         self.short = short if short is not None else BusShort()
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self.sock.bind(path)
-        self.sock.listen(4)
+        self.sock.listen(CONTROL_MAX_CONNECTIONS)
         self.sock.setblocking(False)
+        self.conns: dict[socket.socket, tuple[bytearray, float]] = {}   # request so far, since
 
     def answer(self, line: str) -> str:
         words = line.split()
@@ -169,25 +190,44 @@ class Control:
         return "error: requests are 'fault NODE KIND', 'bus-short MS', 'fault-reset NODE CYCLES|never' and 'state'"
 
     def poll(self) -> None:
-        while select.select([self.sock], [], [], 0)[0]:
+        now = time.monotonic()
+        while True:
             try:
                 conn, _ = self.sock.accept()
-            except BlockingIOError:
-                return
-            with conn:
-                conn.settimeout(1.0)
+            except OSError:                    # none waiting (or no file descriptor left)
+                break
+            conn.setblocking(False)
+            if len(self.conns) >= CONTROL_MAX_CONNECTIONS:
+                self._drop(min(self.conns, key=lambda c: self.conns[c][1]))
+            self.conns[conn] = (bytearray(), now)
+        for conn, (req, since) in list(self.conns.items()):
+            try:
+                chunk = conn.recv(CONTROL_LINE_MAX)
+            except (BlockingIOError, InterruptedError):
+                if now - since > CONTROL_IDLE_S:
+                    self._drop(conn)
+                continue
+            except OSError:
+                self._drop(conn)
+                continue
+            req += chunk
+            if not chunk and not req:
+                self._drop(conn)               # closed without a request
+            elif not chunk or b"\n" in req or len(req) >= CONTROL_LINE_MAX:
+                line = bytes(req).split(b"\n", 1)[0][:CONTROL_LINE_MAX]
                 try:
-                    req = b""
-                    while not req.endswith(b"\n") and len(req) < 256:
-                        chunk = conn.recv(256)
-                        if not chunk:
-                            break
-                        req += chunk
-                    conn.sendall((self.answer(req.decode("ascii", "replace").strip()) + "\n").encode())
+                    conn.send((self.answer(line.decode("ascii", "replace").strip()) + "\n").encode())
                 except OSError:
-                    continue
+                    pass                       # gone, or not reading: its loss
+                self._drop(conn)
+
+    def _drop(self, conn: socket.socket) -> None:
+        del self.conns[conn]
+        conn.close()
 
     def close(self) -> None:
+        for conn in list(self.conns):
+            self._drop(conn)
         self.sock.close()
         try:
             os.unlink(self.path)
@@ -210,26 +250,52 @@ def control_request(path: str | Path, line: str, timeout: float = 10.0) -> str:
     return buf.decode("ascii", "replace").strip()
 
 
+def _recv(link: canlink.Link) -> canlink.Record | None:
+    """The next record from QEMU; LinkLost if the link is gone."""
+    try:
+        return link.recv(None)
+    except canlink.ProtocolError as exc:
+        if link.closed:
+            raise LinkLost("QEMU closed the link without BYE: it dropped this client (QEMU's log "
+                           "says why) or it died") from None
+        raise LinkLost(f"bad record from QEMU: {exc}") from None
+    except OSError as exc:
+        raise LinkLost(f"QEMU dropped the link: {exc.strerror or exc}") from None
+
+
+def _lost_while_sending(link: canlink.Link, what: str, exc: OSError) -> LinkLost | None:
+    """A write failed: None if QEMU said BYE before it went (a normal
+    end), else the LinkLost to raise."""
+    try:
+        while (rec := link.recv(0)) is not None:
+            if rec.type == canlink.BYE:
+                return None
+    except (canlink.ProtocolError, OSError):
+        pass
+    return LinkLost(f"QEMU dropped the link while the simulator sent {what}: {exc.strerror or exc}")
+
+
 def serve(link: canlink.Link, drives: list[Drive], control: Control | None = None,
           short: BusShort | None = None) -> int:
-    """The loop: until QEMU says BYE or closes the socket. Returns the
-    number of frames handled."""
+    """The loop: until QEMU says BYE. Returns the number of frames handled;
+    LinkLost when QEMU drops the link (closes it without BYE, resets it)
+    or sends a bad record."""
     log = logging.getLogger("servoamp.drivesim")
     handled = 0
     if short is None:
         short = control.short if control is not None else BusShort()
     log.info("connected: %d bit/s, guest time %.6f s, nodes %s", link.bitrate,
              link.t_hello_ns / 1e9, ",".join(str(d.node_id) for d in drives))
-    for d in drives:
-        send(link, d.boot(link.t_hello_ns))
+    try:
+        for d in drives:
+            send(link, d.boot(link.t_hello_ns))
+    except OSError as exc:
+        lost = _lost_while_sending(link, "the boot-ups", exc)
+        if lost is None:
+            return handled
+        raise lost from None
     while True:
-        try:
-            rec = link.recv(None)
-        except canlink.ProtocolError as exc:
-            if link.closed:
-                log.info("QEMU closed the link: %s", exc)
-                return handled
-            raise
+        rec = _recv(link)
         if rec is None or rec.type == canlink.BYE:
             log.info("QEMU said BYE")
             return handled
@@ -237,18 +303,25 @@ def serve(link: canlink.Link, drives: list[Drive], control: Control | None = Non
             continue                    # a frame destroyed (by us or another client)
         if control is not None:
             control.poll()
-        if short.shorted(rec.t_ns):
+        try:
+            if short.shorted(rec.t_ns):
+                if not rec.info:
+                    short.frames_destroyed += 1
+                    link.done(rec.seq, error=True)
+                handled += 1
+                continue
+            answers: list[Frame] = []
+            for d in drives:
+                answers += d.on_frame(rec.can_id, rec.data, rec.t_ns, rtr=rec.rtr, eff=rec.eff)
+            send(link, answers)
             if not rec.info:
-                short.frames_destroyed += 1
-                link.done(rec.seq, error=True)
-            handled += 1
-            continue
-        answers: list[Frame] = []
-        for d in drives:
-            answers += d.on_frame(rec.can_id, rec.data, rec.t_ns, rtr=rec.rtr, eff=rec.eff)
-        send(link, answers)
-        if not rec.info:
-            link.done(rec.seq)
+                link.done(rec.seq)
+        except OSError as exc:
+            lost = _lost_while_sending(link, f"the answers to frame {rec.seq}", exc)
+            if lost is None:
+                log.info("QEMU said BYE")
+                return handled
+            raise lost from None
         handled += 1
 
 
@@ -298,16 +371,19 @@ def main(argv: list[str] | None = None) -> int:
         link = connect(args.socket, args.wait)
     except (OSError, canlink.ProtocolError) as exc:
         print(f"servoamp-drivesim: {args.socket}: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_CONNECT
     control = Control(args.control, drives, short) if args.control else None
     try:
         with link:
             n = serve(link, drives, control, short)
+    except LinkLost as exc:
+        print(f"servoamp-drivesim: {args.socket}: {exc}", file=sys.stderr)
+        return EXIT_LINK_LOST
     finally:
         if control is not None:
             control.close()
     logging.getLogger("servoamp.drivesim").info("%d frames handled", n)
-    return 0
+    return EXIT_BYE
 
 
 if __name__ == "__main__":

@@ -1,7 +1,10 @@
 # SPDX-License-Identifier: MIT
 """One simulated CiA 402 drive: CANopen slave (NMT, SDO server, SYNC
-consumer, PDOs, heartbeat producer, EMCY), the 402 state machine in cyclic
-synchronous position mode, and a motor-and-load model.
+consumer, PDOs, heartbeat producer and consumer, node and life guarding,
+EMCY), the 402 state machine in cyclic synchronous position mode, and a
+motor-and-load model. Any frame a master can send is answered as CiA 301
+has it (an SDO abort for a bad request or PDO mapping), never with an
+exception.
 
 Deterministic: the drive has no clock of its own. Every call of
 :meth:`Drive.on_frame` carries the guest time of the frame (its end on the
@@ -15,13 +18,16 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import canopen
-from canopen.objectdictionary import ODVariable
+from canopen.objectdictionary import NUMBER_TYPES, ODVariable
+from canopen.sdo.server import SdoServer
+from canopen.sdo.constants import EXPEDITED, NO_MORE_DATA
 from canopen.sdo.exceptions import SdoAbortedError
 
 from servoamp.drivesim import cia402
@@ -40,10 +46,25 @@ ERR_RESET = 0x0000
 ERR_OVER_CURRENT = 0x2310          # continuous over-current, device output side
 ERR_FOLLOWING = 0x8611             # position control: following error
 ERR_PDO_LENGTH = 0x8210            # PDO not processed: length error
+ERR_GUARDING = 0x8130              # life guard error or heartbeat error
 
 ERRREG_GENERIC = 0x01
 ERRREG_CURRENT = 0x02
+ERRREG_COMMUNICATION = 0x10
 ERRREG_PROFILE = 0x20
+
+# SDO abort codes (CiA 301)
+ABORT_COMMAND = 0x05040001         # client/server command specifier not valid or unknown
+ABORT_OUT_OF_MEMORY = 0x05040005
+ABORT_NO_OBJECT = 0x06020000       # object does not exist in the object dictionary
+ABORT_NOT_MAPPABLE = 0x06040041    # object cannot be mapped to the PDO
+ABORT_PDO_LENGTH = 0x06040042      # number and length of the objects to be mapped exceed the PDO length
+ABORT_NO_SUBINDEX = 0x06090011
+ABORT_VALUE_RANGE = 0x06090030
+ABORT_GENERAL = 0x08000000
+
+SDO_SEGMENTED_MAX = 4096           # bytes a segmented download may carry
+PDO_BITS_MAX = 64
 
 
 class Nmt(enum.IntEnum):
@@ -115,6 +136,68 @@ class _Outbox(canopen.Network):
         self.frames.append(Frame(can_id, bytes(data)))
 
 
+class _SdoServer(SdoServer):
+    """canopen's SDO server, with every request a master can send answered
+    as CiA 301 has it: a segment outside a transfer of its kind, block
+    transfers (not supported) and command specifier 7 are aborted with
+    0x05040001, a segmented download stops at SDO_SEGMENTED_MAX bytes
+    (0x05040005), and anything else that goes wrong is an abort too
+    (0x08000000), never an exception out of :meth:`on_request`. The
+    abort names the request's multiplexer (an initiate's or an unknown
+    command's bytes 1-3; a segment's transfer's)."""
+
+    def __init__(self, node: canopen.LocalNode, node_id: int) -> None:
+        super().__init__(0x600 + node_id, 0x580 + node_id, node)  # type: ignore[no-untyped-call]
+        self._node_id = node_id
+        self._index = 0
+        self._subindex = 0
+        self._transfer: str | None = None      # "upload" | "download": a segmented one going on
+
+    def on_request(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        ccs = data[0] >> 5
+        if ccs == 4:                           # the client aborts: no answer
+            self._transfer = None
+            return
+        segment = {0: "download", 3: "upload"}.get(ccs)
+        if segment is None:                    # an initiate (or not a command): its multiplexer
+            self._index, self._subindex = struct.unpack_from("<HB", data, 1)
+            self._transfer = None
+        if ccs >= 5 or (segment is not None and self._transfer != segment):
+            self._abort(ABORT_COMMAND)
+            return
+        if ccs == 0 and len(self._buffer or b"") + 7 > SDO_SEGMENTED_MAX:
+            self._abort(ABORT_OUT_OF_MEMORY)
+            return
+        try:
+            if ccs == 1:
+                self.init_download(data)  # type: ignore[no-untyped-call]
+                self._transfer = None if data[0] & EXPEDITED else "download"
+            elif ccs == 2:
+                self._buffer = None
+                self.init_upload(data)  # type: ignore[no-untyped-call]
+                self._transfer = "upload" if self._buffer else None
+            elif ccs == 0:
+                self._transfer = None if data[0] & NO_MORE_DATA else "download"
+                self.segmented_download(data[0], data)  # type: ignore[no-untyped-call]
+            else:
+                self.segmented_upload(data[0])  # type: ignore[no-untyped-call]
+                self._transfer = "upload" if self._buffer else None
+        except SdoAbortedError as exc:
+            self._abort(exc.code)
+        except KeyError:
+            self._abort(ABORT_NO_OBJECT)
+        except Exception as exc:               # canopen's own: still an answer, and the drive goes on
+            log.info("node %d: SDO request %s failed: %r", self._node_id, bytes(data).hex(), exc)
+            self._abort(ABORT_GENERAL)
+
+    def abort(self, abort_code: int = ABORT_GENERAL) -> None:
+        self._abort(abort_code)
+
+    def _abort(self, code: int) -> None:
+        self._transfer = None
+        self.send_response(struct.pack("<BHBL", 0x80, self._index, self._subindex, code))  # type: ignore[no-untyped-call]
+
+
 def _int(od: ODVariable, data: bytes) -> int:
     value = od.decode_raw(data)
     if not isinstance(value, int):
@@ -122,12 +205,21 @@ def _int(od: ODVariable, data: bytes) -> int:
     return value
 
 
+def _clamped(x: float, bits: int) -> int:
+    lo, hi = -(1 << (bits - 1)), (1 << (bits - 1)) - 1
+    if math.isnan(x):
+        return 0
+    if math.isinf(x):
+        return hi if x > 0 else lo
+    return max(lo, min(hi, int(round(x))))
+
+
 def _i32(x: float) -> int:
-    return max(-(1 << 31), min((1 << 31) - 1, int(round(x))))
+    return _clamped(x, 32)
 
 
 def _i16(x: float) -> int:
-    return max(-(1 << 15), min((1 << 15) - 1, int(round(x))))
+    return _clamped(x, 16)
 
 
 @dataclass(frozen=True)
@@ -135,6 +227,7 @@ class _Pdo:
     cob_id: int
     trans_type: int
     mapping: tuple[tuple[int, int, int], ...]   # (index, subindex, bits)
+    rtr: bool = True                            # a remote frame asks for it (COB-ID bit 30 clear)
 
     @property
     def length(self) -> int:
@@ -189,6 +282,7 @@ class Drive:
     def _new_node(self) -> canopen.LocalNode:
         od = canopen.import_od(self.eds, self.node_id)
         node = canopen.LocalNode(self.node_id, od)
+        node.sdo = _SdoServer(node, self.node_id)
         # canopen's NMT slave starts a host-timer heartbeat on writes of
         # 0x1017: the heartbeat here runs on guest time instead.
         node._write_callbacks.remove(node.nmt.on_write)
@@ -204,7 +298,9 @@ class Drive:
         self.controlword = 0
         self.mode = 0
         self.error_code = 0
-        self.error_register = 0
+        self.error_register = 0                # of the 402 fault; 0x1001 adds the communication errors
+        self.reaction_syncs = 0                # SYNCs seen in Fault reaction active
+        self.error_history: list[int] = []     # 0x1003, the newest first
         self.demand = self.motor.pos
         self.demand_prev = self.motor.pos
         self.hold = self.motor.pos
@@ -213,8 +309,18 @@ class Drive:
         self.rpdo_latched: dict[int, bytes] = {}
         self.sync_count = 0
         self.hb_next_ns: int | None = None
-        self._pdo_cache: tuple[list[_Pdo], list[_Pdo]] | None = None
+        self._reset_communication_state()
         self._load_model_parameters()
+
+    def _reset_communication_state(self) -> None:
+        self._pdo_cache: tuple[list[_Pdo], list[_Pdo]] | None = None
+        self.rpdo_latched = {}
+        self.comm_errors: set[str] = set()     # "pdo-length", "guarding", "heartbeat N"
+        self.guard_toggle = 0
+        self.guard_seen_ns: int | None = None  # the last node guarding request
+        self.hb_seen: dict[int, int] = {}      # consumed heartbeats: node -> guest time last seen
+        self.tpdo_sent: dict[int, bytes] = {}  # COB-ID -> the data last sent
+        self.tpdo_sampled: dict[int, bytes] = {}   # transmission type 252: sampled at SYNC
 
     def _load_model_parameters(self) -> None:
         self.motor.bandwidth_hz = float(self.read(0x2000, 1))
@@ -268,8 +374,18 @@ class Drive:
         if index == 0x603F:
             return self.error_code
         if index == 0x1001:
-            return self.error_register
+            return self.register()
+        if index == 0x1003:
+            if subindex == 0:
+                return len(self.error_history)
+            return self.error_history[subindex - 1] if subindex <= len(self.error_history) else 0
         return None
+
+    def register(self) -> int:
+        """The error register (0x1001): the fault's bits, and generic plus
+        communication while a communication error lasts."""
+        comm = ERRREG_GENERIC | ERRREG_COMMUNICATION if self.comm_errors else 0
+        return self.error_register | comm
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes, **_: Any) -> None:
         if index == 0x6060:
@@ -283,7 +399,17 @@ class Drive:
             period = _int(od, data)
             self.hb_next_ns = self.t_ns + period * 1_000_000 if period else None
         elif 0x1400 <= index <= 0x1BFF or index == 0x1005:
+            if index != 0x1005:
+                self._check_pdo_write(index, subindex, od, data)
             self._pdo_cache = None
+        elif index == 0x1003:
+            if _int(od, data) != 0:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)   # only 0: clear the history
+            self.error_history = []
+        elif index == 0x1016:
+            self.hb_seen = {}                  # monitoring starts again with the next heartbeat
+            for key in [k for k in self.comm_errors if k.startswith("heartbeat")]:
+                self._comm_clear(key)
         elif index == 0x2000 or index == 0x6073:
             value = _int(od, data)
             if index == 0x6073:
@@ -302,6 +428,52 @@ class Drive:
 
     # --- PDO configuration -------------------------------------------------
 
+    def _check_pdo_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
+        """CiA 301 on a write of a PDO's parameters: a transmission type the
+        drive has, and a mapping of mappable objects (readable ones into a
+        TPDO, writable ones into an RPDO, whole bytes, at most their own
+        length) of at most 64 bits; SdoAbortedError otherwise."""
+        rx = index < 0x1800
+        value = _int(od, data)
+        if (index & 0x3FF) < 0x200:            # communication parameter
+            if subindex == 2 and not (value <= 240 or value in ((254, 255) if rx else (252, 253, 254, 255))):
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+            return
+        record = self.node.object_dictionary[index]
+        if subindex == 0:
+            if isinstance(record, ODVariable) or any(sub not in record for sub in range(1, value + 1)):
+                raise SdoAbortedError(ABORT_PDO_LENGTH)    # more entries than the PDO has
+            entries = [self.read(index, sub) for sub in range(1, value + 1)]
+        else:
+            count = self.read(index, 0)
+            if subindex > count:
+                if value:                      # an entry not in use yet: checked now and with sub 0
+                    self._mapped_bits(value, rx)
+                return
+            entries = [value if sub == subindex else self.read(index, sub) for sub in range(1, count + 1)]
+        if sum(self._mapped_bits(e, rx) for e in entries) > PDO_BITS_MAX:
+            raise SdoAbortedError(ABORT_PDO_LENGTH)
+
+    def _mapped_bits(self, entry: int, rx: bool) -> int:
+        """The bits of a mapping entry (index << 16 | subindex << 8 | bits)
+        if the object may be mapped so; SdoAbortedError if not."""
+        index, subindex, bits = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
+        od = self.node.object_dictionary
+        if index not in od:
+            raise SdoAbortedError(ABORT_NO_OBJECT)
+        obj = od[index]
+        if not isinstance(obj, ODVariable):
+            if subindex not in obj:
+                raise SdoAbortedError(ABORT_NO_SUBINDEX)
+            obj = obj[subindex]
+        elif subindex != 0:
+            raise SdoAbortedError(ABORT_NO_SUBINDEX)
+        assert isinstance(obj, ODVariable)
+        if (not obj.pdo_mappable or not (obj.writable if rx else obj.readable)
+                or obj.data_type not in NUMBER_TYPES or bits == 0 or bits % 8 or bits > len(obj)):
+            raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+        return bits
+
     def _pdos(self) -> tuple[list[_Pdo], list[_Pdo]]:
         if self._pdo_cache is None:
             self._pdo_cache = (self._pdo_list(0x1400, 0x1600), self._pdo_list(0x1800, 0x1A00))
@@ -315,17 +487,45 @@ class Drive:
                 if i >= 4:
                     break
                 continue
-            cob = self.read(comm + i, 1)
-            if cob & 0x80000000:
-                continue        # not valid
-            entries = []
-            for sub in range(1, self.read(mapping + i, 0) + 1):
-                m = self.read(mapping + i, sub)
-                entries.append((m >> 16, (m >> 8) & 0xFF, m & 0xFF))
-            pdo = _Pdo(cob & 0x7FF, self.read(comm + i, 2), tuple(entries))
-            if pdo.length <= 8 and all(bits % 8 == 0 for _, _, bits in entries):
+            try:
+                cob = self.read(comm + i, 1)
+                if cob & 0x80000000:
+                    continue        # not valid
+                entries = []
+                for sub in range(1, self.read(mapping + i, 0) + 1):
+                    m = self.read(mapping + i, sub)
+                    self._mapped_bits(m, comm == 0x1400)
+                    entries.append((m >> 16, (m >> 8) & 0xFF, m & 0xFF))
+                pdo = _Pdo(cob & 0x7FF, self.read(comm + i, 2), tuple(entries), not cob & 0x40000000)
+            except (SdoAbortedError, KeyError) as exc:  # writes are checked: an EDS's own mistake
+                log.info("node %d: PDO %#06x left out: %r", self.node_id, mapping + i, exc)
+                continue
+            if pdo.length <= 8:
                 pdos.append(pdo)
         return pdos
+
+    def _tpdo_data(self, pdo: _Pdo) -> bytes:
+        return b"".join(self.node.get_data(i, s)[: bits // 8] for i, s, bits in pdo.mapping)
+
+    def _tpdo(self, pdo: _Pdo, data: bytes | None = None) -> Frame:
+        """TPDO ``pdo`` as sent now (``data``: sampled before)."""
+        if data is None:
+            data = self._tpdo_data(pdo)
+        self.tpdo_sent[pdo.cob_id] = data
+        return Frame(pdo.cob_id, data)
+
+    def _tpdo_events(self) -> list[Frame]:
+        """Transmission types 254/255: a TPDO whose data changed (the
+        drive's events are the changes of what it maps), checked after
+        every frame in Operational."""
+        out = []
+        if self.nmt == Nmt.OPERATIONAL:
+            for pdo in self._pdos()[1]:
+                if pdo.trans_type >= 254:
+                    data = self._tpdo_data(pdo)
+                    if data != self.tpdo_sent.get(pdo.cob_id):
+                        out.append(self._tpdo(pdo, data))
+        return out
 
     # --- state machine -------------------------------------------------------
 
@@ -341,8 +541,14 @@ class Drive:
 
     def _apply_controlword(self, cw: int) -> None:
         prev, self.controlword = self.controlword, cw
+        edge = bool(cw & cia402.CW_FAULT_RESET and not prev & cia402.CW_FAULT_RESET)
+        if edge and "pdo-length" in self.comm_errors:
+            # a fault reset acknowledges a PDO length error too
+            self.comm_errors.discard("pdo-length")
+            if self.state != State.FAULT or self.fault_reset_cycles != 0:
+                self._emcy(ERR_RESET)          # else the fault's reset EMCY says it
         if self.state == State.FAULT and self.fault_reset_cycles != 0:
-            if cw & cia402.CW_FAULT_RESET and not prev & cia402.CW_FAULT_RESET:
+            if edge:
                 n = self.fault_reset_cycles
                 self.reset_left = -1 if n is None else n
                 log.info("node %d: fault reset begun (%s SYNCs) at %.6f s", self.node_id,
@@ -356,10 +562,10 @@ class Drive:
         self._set_state(new)
 
     def _leave_fault(self) -> None:
-        self._emcy_pending.append((ERR_RESET, 0))
         self.error_code = 0
         self.error_register = 0
         self.reset_left = None
+        self._emcy(ERR_RESET)
         self._set_state(State.SWITCH_ON_DISABLED)
 
     def _trip(self, code: int, register: int) -> None:
@@ -368,8 +574,78 @@ class Drive:
         log.info("node %d: fault %#06x at %.6f s", self.node_id, code, self.t_ns / 1e9)
         self.error_code = code
         self.error_register = ERRREG_GENERIC | register
+        self.reaction_syncs = 0
         self._set_state(State.FAULT_REACTION_ACTIVE)
-        self._emcy_pending.append((code, self.error_register))
+        self._emcy(code)
+
+    # --- EMCY and the communication errors -------------------------------------
+
+    def _emcy(self, code: int) -> None:
+        """An EMCY with ``code`` and the error register as it is now (0:
+        an error gone); a code other than 0 goes to 0x1003 too."""
+        self._emcy_pending.append((code, self.register()))
+        if code != ERR_RESET:
+            self.error_history = [code]        # 0x1003 (the EDS's) holds one entry
+
+    def _comm_error(self, key: str, code: int) -> None:
+        if key not in self.comm_errors:
+            self.comm_errors.add(key)
+            self._emcy(code)
+        elif key == "pdo-length":
+            self._emcy(code)                   # every PDO refused says so
+
+    def _comm_clear(self, key: str) -> None:
+        if key in self.comm_errors:
+            self.comm_errors.discard(key)
+            self._emcy(ERR_RESET)
+
+    def _check_error_control(self) -> None:
+        """Life guarding (0x100C x 0x100D ms without a guarding request,
+        once guarding began) and the heartbeat consumer (0x1016: a node's
+        heartbeat missing for its time, once one came): EMCY 0x8130, gone
+        with the next request or heartbeat."""
+        if self.guard_seen_ns is not None:
+            life_ns = self.read(0x100C) * self.read(0x100D) * 1_000_000
+            if life_ns and self.t_ns - self.guard_seen_ns > life_ns:
+                self._comm_error("guarding", ERR_GUARDING)
+            elif not life_ns:
+                self._comm_clear("guarding")
+        for n, seen in self.hb_seen.items():
+            if self.t_ns - seen > self._consumer_time_ns(n):
+                self._comm_error(f"heartbeat {n}", ERR_GUARDING)
+
+    def _consumer_time_ns(self, node: int) -> int:
+        """0x1016's time for the heartbeat of ``node`` (0: not consumed)."""
+        record = self.node.object_dictionary[0x1016]
+        for sub in range(1, self.read(0x1016, 0) + 1):
+            if not isinstance(record, ODVariable) and sub in record:
+                entry = self.read(0x1016, sub)
+                if entry >> 16 & 0xFF == node and entry & 0xFFFF:
+                    return int(entry & 0xFFFF) * 1_000_000
+        return 0
+
+    def _on_heartbeat(self, node: int) -> None:
+        if node != self.node_id and self._consumer_time_ns(node):
+            self.hb_seen[node] = self.t_ns
+            self._comm_clear(f"heartbeat {node}")
+
+    def _on_remote(self, can_id: int) -> list[Frame]:
+        """A remote frame: node guarding (0x700 + node: the NMT state with
+        the toggle bit) or a TPDO whose COB-ID allows it."""
+        if can_id == 0x700 + self.node_id:
+            if self.nmt == Nmt.INITIALISING:
+                return []
+            answer = Frame(can_id, bytes([self.guard_toggle << 7 | int(self.nmt)]))
+            self.guard_toggle ^= 1
+            self.guard_seen_ns = self.t_ns
+            self._comm_clear("guarding")
+            return [answer]
+        if self.nmt != Nmt.OPERATIONAL:
+            return []
+        for pdo in self._pdos()[1]:
+            if can_id == pdo.cob_id and pdo.rtr:
+                return [self._tpdo(pdo, self.tpdo_sampled.get(pdo.cob_id) if pdo.trans_type == 252 else None)]
+        return []
 
     # --- the bus -------------------------------------------------------------
 
@@ -396,9 +672,16 @@ class Drive:
         self._advance(t_ns)
         if self.off_bus:
             return []
-        answers = self._dispatch(can_id, data) if not eff and not rtr else []
+        if eff:
+            answers = []
+        elif rtr:
+            answers = self._on_remote(can_id)
+        else:
+            answers = self._dispatch(can_id, data)
         if self.state == State.FAULT_REACTION_ACTIVE and self.last_sync_ns is None:
             self._set_state(State.FAULT)           # no SYNC to run the reaction on
+        self._check_error_control()
+        answers += self._tpdo_events()
         out: list[Frame] = []
         if self.nmt != Nmt.STOPPED:                # EMCY first: the lower COB-ID wins
             for code, reg in self._emcy_pending:
@@ -431,6 +714,9 @@ class Drive:
     def _dispatch(self, can_id: int, data: bytes) -> list[Frame]:
         if can_id == 0x000:
             return self._on_nmt(data)
+        if 0x701 <= can_id <= 0x77F and len(data) == 1:
+            self._on_heartbeat(can_id - 0x700)
+            return []
         if self.nmt == Nmt.STOPPED:
             return []
         sync_id = self.read(0x1005) & 0x7FF
@@ -446,8 +732,10 @@ class Drive:
             for pdo in self._pdos()[0]:
                 if can_id == pdo.cob_id:
                     if len(data) < pdo.length:
-                        self._emcy_pending.append((ERR_PDO_LENGTH, ERRREG_GENERIC))
-                    elif pdo.trans_type >= 254:
+                        self._comm_error("pdo-length", ERR_PDO_LENGTH)
+                        continue
+                    self._comm_clear("pdo-length")
+                    if pdo.trans_type >= 254:
                         self._apply_rpdo(pdo, data)
                     else:
                         self.rpdo_latched[pdo.cob_id] = bytes(data)
@@ -470,8 +758,7 @@ class Drive:
         elif cs == 0x82:                      # reset communication: 0x1000-0x1FFF
             for index in [i for i in self.node.data_store if 0x1000 <= i <= 0x1FFF]:
                 del self.node.data_store[index]
-            self._pdo_cache = None
-            self.rpdo_latched = {}
+            self._reset_communication_state()
             return self.boot(self.t_ns)
         return []
 
@@ -481,8 +768,11 @@ class Drive:
             raw = data[offset: offset + bits // 8]
             offset += bits // 8
             try:
+                full = len(self._var(index, subindex)) // 8
+                if len(raw) < full:                # a mapping of the low bytes: the rest kept
+                    raw += self.node.get_data(index, subindex)[len(raw):full]
                 self.node.set_data(index, subindex, raw)
-            except SdoAbortedError as exc:
+            except (SdoAbortedError, KeyError) as exc:
                 log.info("node %d: RPDO write %04x:%02x refused (%s)", self.node_id, index,
                          subindex, exc)
 
@@ -500,9 +790,12 @@ class Drive:
             self.motor.step(self.hold, self.hold, dt, True)
         else:
             self.motor.step(0.0, 0.0, dt, False)
+        reacting = self.state == State.FAULT_REACTION_ACTIVE
         self._check_following_error(dt)
-        if self.state == State.FAULT_REACTION_ACTIVE:
-            self._set_state(State.FAULT)
+        if reacting and self.reaction_syncs >= 1:
+            self._set_state(State.FAULT)       # the reaction held the motor a whole cycle
+        elif self.state == State.FAULT_REACTION_ACTIVE:
+            self.reaction_syncs += 1           # tripped in this cycle: its TPDO shows the reaction
         elif self.state == State.FAULT and self.reset_left is not None and self.reset_left > 0:
             self.reset_left -= 1               # a slow fault reset, bit 7 still held
             if self.reset_left == 0:
@@ -525,8 +818,11 @@ class Drive:
         out = []
         for pdo in self._pdos()[1]:
             if 1 <= pdo.trans_type <= 240 and self.sync_count % pdo.trans_type == 0:
-                payload = b"".join(self.node.get_data(i, s)[: bits // 8] for i, s, bits in pdo.mapping)
-                out.append(Frame(pdo.cob_id, payload))
+                out.append(self._tpdo(pdo))
+            elif pdo.trans_type == 0 and self._tpdo_data(pdo) != self.tpdo_sent.get(pdo.cob_id):
+                out.append(self._tpdo(pdo))    # acyclic: at the SYNC after a change
+            elif pdo.trans_type == 252:
+                self.tpdo_sampled[pdo.cob_id] = self._tpdo_data(pdo)   # for a remote request
         return out
 
     def _check_following_error(self, dt: float) -> None:
