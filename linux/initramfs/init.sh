@@ -27,9 +27,8 @@ done
 # (docs/cycle.md, "Priorities under PREEMPT_RT"). Linux runs on CPU0 only
 # (maxcpus=1). On the vanilla kernel that thread exists but never runs (the
 # hard interrupt wakes servod): its priority does not matter there.
-# Only where the cycle interrupt's driver bound a device: the ZynqMP board
-# has the driver but no cycle interrupt in its devicetree yet (issue 35,
-# item 2).
+# Only where the cycle interrupt's driver bound a device (a board whose
+# devicetree has no cycle interrupt node gets the message below).
 if ls -d /sys/bus/platform/drivers/servoamp-cycle-uio/*/uio >/dev/null 2>&1; then
 	irqprio cycle-interrupt 81 || echo "servoamp: irqprio cycle-interrupt failed"
 elif [ -e /lib/modules/servoamp_cycle_uio.ko ]; then

@@ -166,12 +166,14 @@ def test_initramfs_has_the_arm64_userland_and_module(board: qemu.Board) -> None:
 
 @pytest.mark.board
 def test_servod_ampctl_and_the_uio_module_on_the_a53(board: qemu.Board) -> None:
-    """One boot on virtual time: servod and ampctl run on the A53 (they
-    stop where the board has no devices for them yet: no OCM mailbox UIO
-    node, no servod to answer); /init loaded the UIO module (only the
-    out-of-tree taint, no cycle interrupt in the devicetree yet); rmmod and
-    insmod again with nothing in dmesg; irqprio sets an interrupt thread's
-    SCHED_FIFO priority on the mainline PREEMPT_RT kernel."""
+    """One boot on virtual time: servod and ampctl run on the A53 (servod
+    opens the OCM mailbox and the cycle interrupt through UIO and waits for
+    the servo; ampctl asks it; the exchange with the R5:
+    tests/robot/zynqmp/05_cycle.robot); /init loaded the UIO module (only
+    the out-of-tree taint) and gave the cycle interrupt's thread its
+    priority; rmmod and insmod again with nothing in dmesg; irqprio sets an
+    interrupt thread's SCHED_FIFO priority on the mainline PREEMPT_RT
+    kernel."""
     imgs = qemu.prepare_images(board)
     prompt = str(board.data["linux"]["prompt"])
     with qemu.QemuMachine(board, imgs, clock="virtual") as m:
@@ -184,25 +186,33 @@ def test_servod_ampctl_and_the_uio_module_on_the_a53(board: qemu.Board) -> None:
         assert sh("uname -m") == (0, UNAME_M[board.arch])
         rc, out = sh("servod -h")
         assert rc == 1 and out.startswith("usage: servod"), out
-        rc, out = sh("servod --telemetry off -s /tmp/servod.sock -p /tmp/servod.params")
-        assert rc == 1, out
+        rc, out = sh("(servod --telemetry off -s /tmp/servod.sock -p /tmp/servod.params > /tmp/servod.log 2>&1 &); "
+                     "i=0; until grep -q 'waiting for the servo' /tmp/servod.log || [ $i -ge 100 ]; do "
+                     "sleep 0.05; i=$((i+1)); done; cat /tmp/servod.log")
+        assert rc == 0, out
         assert "no parameter file /tmp/servod.params: defaults" in out, out
-        assert "no UIO device for the OCM mailbox (ocm-mailbox)" in out, out
+        assert "ocm-mailbox: /dev/uio" in out and "cycle-interrupt: /dev/uio" in out, out
+        assert "waiting for the servo" in out, out
         rc, out = sh("ampctl -h")
         assert rc == 1 and out.startswith("usage: ampctl"), out
         rc, out = sh("ampctl -s /tmp/servod.sock status")
+        assert rc == 3 and "remoteproc=offline" in out and "servo not running" in out, out
+        assert sh("kill $(pidof servod); sleep 0.2; pidof servod")[0] == 1
+        rc, out = sh("ampctl -s /tmp/servod.sock status")
         assert rc == 2 and "servod not reachable" in out, out
 
-        # /init loaded the module; the board has no cycle interrupt node yet
+        # /init loaded the module, which bound the cycle interrupt, and gave
+        # its thread FIFO 81
         boot_log = console.output
-        assert "servoamp: no cycle interrupt in the devicetree" in boot_log
+        assert "servoamp: no cycle interrupt in the devicetree" not in boot_log
         assert "servoamp: insmod" not in boot_log and "irqprio cycle-interrupt failed" not in boot_log
         rc, out = sh("grep ^servoamp_cycle_uio /proc/modules")
         assert rc == 0 and out.endswith("(O)"), out
         rc, out = sh("dmesg | grep -i -e cycle.uio -e taint")
         lines = out.splitlines()
         taint_note = "servoamp_cycle_uio: loading out-of-tree module taints kernel."
-        assert len(lines) == 1 and lines[0].endswith(taint_note), out
+        bound = "servoamp-cycle-uio ff110058.cycle-interrupt: cycle interrupt"
+        assert len(lines) == 2 and lines[0].endswith(taint_note) and bound in lines[1], out
         assert sh("cat /proc/sys/kernel/tainted") == (0, str(TAINT_OOT_MODULE))
 
         drv = "/sys/bus/platform/drivers/servoamp-cycle-uio"
@@ -211,7 +221,8 @@ def test_servod_ampctl_and_the_uio_module_on_the_a53(board: qemu.Board) -> None:
         assert sh(f"insmod /lib/modules/servoamp_cycle_uio.ko && test -e {drv}")[0] == 0
         assert sh("grep -c ^servoamp_cycle_uio /proc/modules")[1] == "1"
         rc, out = sh("dmesg")
-        assert out == "", f"kernel messages after rmmod/insmod:\n{out}"
+        # the driver binding the cycle interrupt again, and nothing else
+        assert len(out.splitlines()) == 1 and bound in out, f"kernel messages after rmmod/insmod:\n{out}"
         assert sh("cat /proc/sys/kernel/tainted") == (0, str(TAINT_OOT_MODULE))
         assert sh("rmmod servoamp_cycle_uio && insmod /lib/modules/servoamp_cycle_uio.ko")[0] == 0
 
