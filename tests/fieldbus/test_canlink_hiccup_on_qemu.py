@@ -32,9 +32,10 @@ The tests share that setup:
   the master also reads objects by SDO at 1 kHz: with every SYNC an
   expedited upload of 0x1000 or 0x6041 from the next drive that has no
   request outstanding (one at a time per drive, as a CANopen client does;
-  while QEMU is paused they all wait). The 500 ms case is an expected
-  failure for one cause, QEMU dropping the simulator on a pause of over
-  ~280 ms (see KNOWN_DROP), until canlink is fixed.
+  while QEMU is paused they all wait). Before canlink queued an active
+  client's frames (patch 0025), every pause of over ~280 ms dropped the
+  simulator ("it does not read (socket buffer full)"): the master's frames
+  of the pause reach it as one burst, more than its socket holds.
 
 Pass, for both: the simulator is connected to the end (QEMU logs no
 disconnect), the master still sees all four drives answer its SYNCs after
@@ -358,25 +359,6 @@ def soak(tmp_path: Path, longest_s: float) -> None:
                            f"{unanswered[:5]}"
 
 
-# QEMU drops the drive simulator when a pause of more than ~280 ms ends
-# (issue 36, found by this soak): QEMU writes an INFO frame to every active
-# client for each frame a passive client sent, and the master's frames of
-# a long pause (as many as its socket holds: ~278 records of 32 bytes with
-# Linux's default 212992-byte buffer) come in one burst, which the
-# simulator's socket (the same ~278) cannot take while it is still busy;
-# can_lockstep.c's cl_send() then drops an active client at once ("an
-# active client ... never falls behind by more than a frame"). That one
-# failure is expected with pauses up to 500 ms until canlink queues an
-# active client's INFO frames as it does a passive client's; any other
-# failure is one.
-KNOWN_DROP = "client drivesim disconnected: it does not read (socket buffer full)"
-
-
 @pytest.mark.parametrize("longest_ms", [200, 500])
 def test_soak_pauses_sync_and_sdo(tmp_path: Path, longest_ms: int) -> None:
-    try:
-        soak(tmp_path, longest_ms / 1000)
-    except AssertionError:
-        if longest_ms > 250 and KNOWN_DROP in (tmp_path / "qemu.log").read_text():
-            pytest.xfail(f"QEMU: {KNOWN_DROP} (after a pause of over ~280 ms; see KNOWN_DROP)")
-        raise
+    soak(tmp_path, longest_ms / 1000)
