@@ -1,18 +1,20 @@
 # SPDX-License-Identifier: MIT
 """A host hiccup must not drop the drive simulator (issue 36, item 1;
-docs/canlink.md, "The exchange").
+docs/canlink.md, "The exchange"), and the bus soaks up twenty of them
+(issue 36, "A soak test in the suite").
 
 Our QEMU under qtest (fieldbus_qemu.Board) with servoamp-drivesim (four
 drives, an ACTIVE client) and a host CANopen master that is a passive
 canlink client sending SYNC at 1 kHz of host time. The guest sends a frame
-every millisecond of guest time (each one an exchange with the simulator).
-QEMU is paused for 50 ms (SIGSTOP, SIGCONT) ten times: the master's SYNCs
-pile up in its socket, QEMU reads them at once when it runs again, and the
-drives answer every one with a TPDO1 (as INFO frames, outside any
-exchange). Those answers are not answers to the guest's frame: before the
-fix QEMU counted every frame the simulator wrote before its DONE against
-the guest frame's limit of 32, dropped it ("too many answers to one
-frame") on the first or second pause, and every drive vanished.
+(each one an exchange with the simulator), then runs at least a
+millisecond of guest time, keeping guest time at twice host time at least.
+QEMU is paused (SIGSTOP, SIGCONT): the master's SYNCs pile up in its
+socket, QEMU reads them at once when it runs again, and the drives answer
+every one with a TPDO1 (as INFO frames, outside any exchange). Those
+answers are not answers to the guest's frame: before the fix QEMU counted
+every frame the simulator wrote before its DONE against the guest frame's
+limit of 32, dropped it ("too many answers to one frame") on the first or
+second pause, and every drive vanished.
 
 A python-can logger (``python -m can.logger -i servoamp``, a passive
 client) records the bus meanwhile: its timestamps (each frame's end on the
@@ -20,26 +22,50 @@ modelled bus) must never go back (item 5: before the fix a guest frame
 reached passive clients at once and an answer only at its bus time, so
 frames went back by up to milliseconds in its file).
 
-Pass: the simulator is connected to the end (QEMU logs no disconnect), the
-master still sees all four drives answer its SYNCs after the last pause,
-when QEMU quits the simulator exits 0 without a traceback, and the
-logger's file is in time order.
+The tests share that setup:
+
+- ``test_host_pauses_do_not_drop_the_drive_simulator``: ten 50 ms pauses,
+  the master sends SYNC only (the issue's reproduction);
+- ``test_soak_pauses_sync_and_sdo``: the soak. Twenty pauses 0.2 s apart,
+  of a random length in 50..200 ms and, as the issue asks, 50..500 ms
+  (seeded; the seed is printed, ``SERVOAMP_SOAK_SEED`` replays a run), and
+  the master also reads objects by SDO at 1 kHz: with every SYNC an
+  expedited upload of 0x1000 or 0x6041 from the next drive that has no
+  request outstanding (one at a time per drive, as a CANopen client does;
+  while QEMU is paused they all wait). Before canlink queued an active
+  client's frames (patch 0025), every pause of over ~280 ms dropped the
+  simulator ("it does not read (socket buffer full)"): the master's frames
+  of the pause reach it as one burst, more than its socket holds.
+
+Pass, for both: the simulator is connected to the end (QEMU logs no
+disconnect), the master still sees all four drives answer its SYNCs after
+the last pause, when QEMU quits the simulator exits 0 without a
+traceback, the logger's file is in time order, and QEMU's RSS grows by no
+more than docs/canlink.md bounds a passive client's backlog (``max-backlog``
+* 32 bytes, 2 MiB by default) times the passive clients (the master and
+the logger; ``SERVOAMP_SOAK_RSS_BOUND`` in bytes overrides it), measured
+from /proc/<pid>/status before the master connects, before each pause and
+at the end; the figures are printed. The soak also wants an answer, with
+the right value, to every SDO read the master made after the last pause.
 """
 
 from __future__ import annotations
 
 import os
+import random
 import signal
 import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import can
 import pytest
 
-from fieldbus_helpers import nmt
+from fieldbus_helpers import nmt, sdo_response, sdo_upload
 from fieldbus_qemu import Board, GuestFrame, qemu_binary
 from servoamp import canlink
 
@@ -48,21 +74,46 @@ pytestmark = pytest.mark.board
 REPO = Path(__file__).resolve().parents[2]
 MS = 1_000_000
 NODES = (1, 2, 3, 4)
-PAUSES = 10
-PAUSE_S = 0.050
+# docs/canlink.md, "Silence and death": a passive client's backlog takes at
+# most max-backlog (default 65536) * 32 bytes of QEMU's memory
+BACKLOG_BOUND = 65536 * 32
+PASSIVE_CLIENTS = 2                       # the master and can.logger
+RSS_BOUND = int(os.environ.get("SERVOAMP_SOAK_RSS_BOUND", PASSIVE_CLIENTS * BACKLOG_BOUND))
+# what the master reads by SDO, and what a drive answers (its EDS)
+SDO_OBJECTS = {0x1000: 0x00020192, 0x6041: None}   # device type; statusword (any value)
+SDO_TIMEOUT_S = 2.0                       # longer than any pause
+GUEST_SPEED = 2.0                         # guest time per host time, at least
+
+
+@dataclass
+class SdoRead:
+    node: int
+    index: int
+    t_sent: float
+    t_answer: float = 0.0
+    answer: tuple[str, int, int, int] | None = None
 
 
 class Master:
     """A passive client: SYNC every millisecond of host time from one
-    thread, every record read in another (TPDO1s counted per node, with the
-    host time they came)."""
+    thread (and, with ``sdo``, an SDO upload request to the next drive
+    that has none outstanding), every record read in another (TPDO1s
+    counted per node, with the host time they came; SDO answers matched to
+    their request)."""
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, sdo: bool = False) -> None:
         self.link = canlink.Link.connect(str(path), active=False, name="master")
         self.stop = threading.Event()
         self.tpdos: list[tuple[float, int]] = []
         self.error: BaseException | None = None
         self.sent = 0
+        self.sdo = sdo
+        self.lock = threading.Lock()
+        self.outstanding: dict[int, SdoRead] = {}
+        self.reads: list[SdoRead] = []        # every request, in the order sent
+        self.unsolicited: list[tuple[int, bytes]] = []
+        self.t_start = time.monotonic()
+        self.t_stop = 0.0
         self.threads = [threading.Thread(target=self._sync, daemon=True),
                         threading.Thread(target=self._read, daemon=True)]
         for t in self.threads:
@@ -70,14 +121,36 @@ class Master:
 
     def _sync(self) -> None:
         nxt = time.monotonic()
+        tick = 0
         try:
             while not self.stop.is_set():
                 self.link.send_frame(0x080)
                 self.sent += 1
+                if self.sdo:
+                    self._sdo_request(tick)
+                tick += 1
                 nxt += 0.001
                 time.sleep(max(0.0, nxt - time.monotonic()))
         except OSError:
             pass
+
+    def _sdo_request(self, tick: int) -> None:
+        """An upload request to the first drive from ``tick``'s on that has
+        none outstanding (one at a time per drive, as a CANopen client
+        does; one timed out stays unanswered), if any."""
+        now = time.monotonic()
+        index = list(SDO_OBJECTS)[tick % len(SDO_OBJECTS)]
+        with self.lock:
+            for k in range(len(NODES)):
+                node = NODES[(tick + k) % len(NODES)]
+                old = self.outstanding.get(node)
+                if old is None or now - old.t_sent >= SDO_TIMEOUT_S:
+                    self.outstanding[node] = read = SdoRead(node, index, now)
+                    self.reads.append(read)
+                    break
+            else:
+                return
+        self.link.send_frame(*sdo_upload(node, index, 0))
 
     def _read(self) -> None:
         try:
@@ -85,17 +158,59 @@ class Master:
                 rec = self.link.recv(None)
                 if rec is None or rec.type == canlink.BYE:
                     return
-                if rec.type == canlink.FRAME and rec.can_id - 0x180 in NODES:
+                if rec.type != canlink.FRAME:
+                    continue
+                if rec.can_id - 0x180 in NODES:
                     self.tpdos.append((time.monotonic(), rec.can_id - 0x180))
+                elif rec.can_id - 0x580 in NODES:
+                    with self.lock:
+                        read = self.outstanding.pop(rec.can_id - 0x580, None)
+                        if read is None:
+                            self.unsolicited.append((rec.can_id, rec.data))
+                        else:
+                            read.t_answer = time.monotonic()
+                            read.answer = sdo_response(rec.data)
         except BaseException as exc:          # noqa: BLE001 - reported by the test
             self.error = exc
 
+    def pending(self) -> int:
+        with self.lock:
+            return len(self.outstanding)
+
     def close(self) -> None:
+        if not self.stop.is_set():
+            self.t_stop = time.monotonic()
         self.stop.set()
         self.threads[0].join(5)
 
 
-def test_host_pauses_do_not_drop_the_drive_simulator(tmp_path: Path) -> None:
+def tail(path: Path, n: int = 30) -> str:
+    """The last ``n`` lines of a log, without the canopen package's line
+    per SDO transfer."""
+    lines = [line for line in path.read_text().splitlines() if "Expedited upload" not in line]
+    return "\n".join(lines[-n:])
+
+
+def vm_rss(pid: int) -> int:
+    """QEMU's resident set (VmRSS of /proc/<pid>/status) in bytes."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024
+    raise AssertionError(f"no VmRSS for {pid}")
+
+
+@dataclass
+class Run:
+    master: Master
+    t_last_pause: float                   # host time the last pause ended
+    rss: list[int] = field(default_factory=list)   # before the master, before each pause, at the end
+    guest_frames: int = 0
+
+
+def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
+    """The setup above with QEMU paused for each of ``pauses`` (seconds),
+    0.2 s of running apart; the checks both tests make. The run's figures
+    for the test's own checks."""
     board = Board(qemu_binary(), tmp_path, timeout_ms=2000)
     err = tmp_path / "drivesim.err"
     drivesim = subprocess.Popen(
@@ -104,6 +219,7 @@ def test_host_pauses_do_not_drop_the_drive_simulator(tmp_path: Path) -> None:
         stderr=open(err, "w"), text=True, cwd=REPO,
         env={**os.environ, "PYTHONPATH": str(REPO / "python")})
     master = None
+    run = None
     asc = tmp_path / "bus.asc"
     logger = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "servoamp", "-c", str(board.can_sock),
                                "-f", str(asc)], stdout=subprocess.PIPE, stderr=open(tmp_path / "logger.err", "w"),
@@ -123,29 +239,52 @@ def test_host_pauses_do_not_drop_the_drive_simulator(tmp_path: Path) -> None:
         board.send(GuestFrame(*nmt(0x01, 0)))
         board.clock_step(MS)
         board.receive_all()
-        master = Master(board.can_sock)
+        rss0 = vm_rss(board.proc.pid)
+        master = Master(board.can_sock, sdo=sdo)
+        run = Run(master, 0.0, [rss0])
 
-        pauses = 0
+        done = 0
+        g0, h0 = board.now, time.monotonic()
+        t_guest = h0
         t_next_pause = time.monotonic() + 0.3
-        t_last_pause = 0.0
-        while pauses < PAUSES or time.monotonic() < t_last_pause + 0.5:
+        t_end = float("inf")
+        while time.monotonic() < t_end:
             # the guest: its own frame (a heartbeat, which no drive answers)
-            # every millisecond of guest time; what it receives is left in
-            # CAN0's RX FIFO (overruns do not matter here)
-            board.send(GuestFrame(0x77F, b"\x05"))
-            board.clock_step(MS)
-            if pauses < PAUSES and time.monotonic() >= t_next_pause:
+            # every millisecond of host time at most, and guest time runs
+            # GUEST_SPEED times host time (after a pause it makes up for
+            # it), whether the simulator is quick to answer or not: the
+            # master's 1 kHz of host time then fills at most half the bus,
+            # and the frames waiting for it drain (docs/canlink.md: over
+            # 1024 a frame is dropped, and an SDO request would go
+            # unanswered). What the guest receives is left in CAN0's RX
+            # FIFO (overruns do not matter here)
+            if time.monotonic() >= t_guest:
+                board.send(GuestFrame(0x77F, b"\x05"))
+                run.guest_frames += 1
+                t_guest = time.monotonic() + 0.001
+            else:
+                time.sleep(0.0002)
+            board.clock_set(max(board.now + MS // 10, g0 + int(GUEST_SPEED * (time.monotonic() - h0) * 1e9)))
+            if done < len(pauses) and time.monotonic() >= t_next_pause:
+                run.rss.append(vm_rss(board.proc.pid))
                 os.kill(board.proc.pid, signal.SIGSTOP)
-                time.sleep(PAUSE_S)
+                time.sleep(pauses[done])
                 os.kill(board.proc.pid, signal.SIGCONT)
-                pauses += 1
-                t_last_pause = time.monotonic()
-                t_next_pause = t_last_pause + 0.2
-            assert drivesim.poll() is None, \
-                f"the drive simulator exited after {pauses} pauses:\n{err.read_text()}"
-        master.close()
-        time.sleep(0.2)
-        after = {n for t, n in master.tpdos if t > t_last_pause + 0.1}
+                done += 1
+                run.t_last_pause = time.monotonic()
+                t_next_pause = run.t_last_pause + 0.2
+                if done == len(pauses):
+                    t_end = run.t_last_pause + 0.5
+            if not master.stop.is_set() and time.monotonic() >= t_end:
+                # the master stops; the guest runs on until every SDO
+                # read has its answer (or its timeout is long past)
+                master.close()
+                t_end = time.monotonic() + (SDO_TIMEOUT_S if master.pending() else 0.2)
+            elif master.stop.is_set() and not master.pending():
+                t_end = min(t_end, time.monotonic() + 0.2)
+            assert drivesim.poll() is None, f"the drive simulator exited after {done} pauses:\n{tail(err)}"
+        run.rss.append(vm_rss(board.proc.pid))
+        after = {n for t, n in master.tpdos if t > run.t_last_pause + 0.1}
         assert master.error is None, master.error
         assert master.sent > 500, master.sent
         assert after == set(NODES), f"drives answering SYNC after the last pause: {sorted(after)}"
@@ -168,9 +307,58 @@ def test_host_pauses_do_not_drop_the_drive_simulator(tmp_path: Path) -> None:
             logger.wait(timeout=10)
     assert "disconnected" not in log, log
     assert rc == 0, log
-    text = err.read_text()
-    assert drc == 0 and "Traceback" not in text, text
+    assert drc == 0 and "Traceback" not in err.read_text(), tail(err)
+    # can.logger ends when QEMU quits, with python-can's CanOperationError
+    # (its way to say the bus is gone): that one traceback only
+    lerr = (tmp_path / "logger.err").read_text()
+    assert lerr.count("Traceback") <= 1 and (
+        "Traceback" not in lerr or lerr.rstrip().endswith("QEMU said BYE (the bus is gone)")), lerr
     stamps = [m.timestamp for m in can.LogReader(str(asc)) if not m.is_error_frame]
     assert len(stamps) > 1000, len(stamps)
     back = [(i, a, b) for i, (a, b) in enumerate(zip(stamps, stamps[1:])) if b < a]
     assert not back, f"{len(back)} of {len(stamps)} frames go back in time, first {back[:3]}"
+    growth = max(run.rss) - run.rss[0]
+    drops = [line.rsplit("(", 1)[-1].rstrip(")") for line in log.splitlines() if "a frame dropped" in line]
+    print(f"QEMU's VmRSS: {run.rss[0] / 2**20:.1f} MiB before the master, {max(run.rss) / 2**20:.1f} MiB at most "
+          f"before a pause or at the end, {run.rss[-1] / 2**20:.1f} MiB at the end: grew {growth / 2**20:.2f} MiB "
+          f"(bound {RSS_BOUND / 2**20:.2f} MiB); {run.guest_frames} guest frames, {len(stamps)} frames logged"
+          + (f"; frames dropped by QEMU: {drops[-1]}" if drops else ""))
+    assert growth <= RSS_BOUND, f"QEMU's RSS grew by {growth} bytes, over {RSS_BOUND}: {run.rss}"
+    return run
+
+
+def test_host_pauses_do_not_drop_the_drive_simulator(tmp_path: Path) -> None:
+    hiccups(tmp_path, [0.050] * 10, sdo=False)
+
+
+def soak(tmp_path: Path, longest_s: float) -> None:
+    """Twenty pauses of 50 ms..``longest_s``, SYNC and SDO reads: the
+    checks of :func:`hiccups`, and every SDO read made after the last pause
+    answered, every answer right."""
+    seed = int(os.environ.get("SERVOAMP_SOAK_SEED", random.randrange(2**32)))
+    rng = random.Random(seed)
+    pauses = [rng.uniform(0.050, longest_s) for _ in range(20)]
+    print(f"soak seed {seed} (SERVOAMP_SOAK_SEED={seed} replays it): pauses "
+          + " ".join(f"{p * 1000:.0f}" for p in pauses) + " ms")
+    run = hiccups(tmp_path, pauses, sdo=True)
+    reads = run.master.reads
+    late = [r for r in reads if r.t_sent > run.t_last_pause]
+    unanswered = [r for r in late if r.answer is None]
+    wrong = [r for r in reads if r.answer is not None
+             and (r.answer[:3] != ("upload", r.index, 0)
+                  or SDO_OBJECTS[r.index] not in (None, r.answer[3]))]
+    lost = sum(r.answer is None for r in reads)
+    lat = sorted(r.t_answer - r.t_sent for r in late if r.answer is not None) or [float("nan")]
+    print(f"SDO reads: {len(reads)} sent ({len(reads) / (run.master.t_stop - run.master.t_start):.0f}/s), {len(reads) - lost} answered, {len(late)} after the last pause "
+          f"({len(late) - len(unanswered)} answered, median {lat[len(lat) // 2] * 1000:.2f} ms, "
+          f"max {lat[-1] * 1000:.2f} ms); {len(run.master.unsolicited)} unsolicited answers; "
+          f"{run.master.sent} SYNCs in {run.master.t_stop - run.master.t_start:.1f} s")
+    assert not wrong, f"{len(wrong)} wrong answers, first {wrong[:3]}"
+    assert len(late) > 100, len(late)
+    assert not unanswered, f"{len(unanswered)} of {len(late)} SDO reads after the last pause unanswered: " \
+                           f"{unanswered[:5]}"
+
+
+@pytest.mark.parametrize("longest_ms", [200, 500])
+def test_soak_pauses_sync_and_sdo(tmp_path: Path, longest_ms: int) -> None:
+    soak(tmp_path, longest_ms / 1000)
