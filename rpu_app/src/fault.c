@@ -82,6 +82,10 @@ void fault_report(uint32_t kind, const uint32_t *frame)
 			in_fault = 0;
 			servo_quiesce_and_park();
 		}
+#else
+		/* nothing to poll: wait for the power-down without spinning
+		 * (under -icount a spinning core takes turns from Linux) */
+		wfi();
 #endif
 	}
 }
