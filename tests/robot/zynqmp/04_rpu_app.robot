@@ -17,9 +17,7 @@ ${STATS}          stats cycle=(\\d+) guest_us=\\d+ period_min_ns=(\\d+) period_m
 *** Test Cases ***
 rpu_app Starts On R5 0
     Clear Terminal Tester Report    ${SERVO_UART}
-    Select Firmware    rpu_app.elf
-    Execute Shell Command    echo start > ${RPROC}/state
-    Remoteproc State Should Be    running
+    Start Firmware Without Status Block    rpu_app.elf
     ${banner}=    Wait For Line On Uart    servoamp rpu_app    testerId=${SERVO_UART}
     Should Contain    ${banner}    board=zynqmp_qemu
     ${cpu}=    Wait For Line On Uart    no VBAR: vectors at 0x0    testerId=${SERVO_UART}
@@ -67,7 +65,7 @@ Stop And Start Ten Times
 
 rpu_app Without A Resource Table Starts Too
     Clear Terminal Tester Report    ${SERVO_UART}
-    Start Selected Firmware Named    rpu_app-norsc.elf
+    Start Firmware Without Status Block    rpu_app-norsc.elf
     Wait For Line On Uart    servoamp rpu_app    testerId=${SERVO_UART}
     Dmesg Should Contain    no resource table found
     Execute Shell Command    test ! -e ${TRACE0}
@@ -75,9 +73,3 @@ rpu_app Without A Resource Table Starts Too
     Execute Shell Command    echo stop > ${RPROC}/state
     Remoteproc State Should Be    offline
 
-*** Keywords ***
-Start Selected Firmware Named
-    [Arguments]    ${firmware}
-    Select Firmware    ${firmware}
-    Execute Shell Command    echo start > ${RPROC}/state
-    Remoteproc State Should Be    running

@@ -24,13 +24,8 @@ Boot Cycle Board
     Set Suite Variable    ${CLOCK}    ${clock}
     Boot Board To Shell
     Start Servod
-    Start rpu_app
+    Start Firmware Without Status Block    ${FW}
     Wait For Servod Log    parameter set loaded
-
-Start rpu_app
-    Select Firmware    ${FW}
-    Execute Shell Command    echo start > ${RPROC}/state
-    Remoteproc State Should Be    running
 
 Status
     ${out}=    Ampctl    status    expected_rc=any
@@ -100,7 +95,7 @@ An Operator's Stop Is Final, A Start Attaches Again
     Should Be Equal    ${st}[recoveries]    0
     ${crash}=    Servod Log Count    crash
     Should Be Equal As Integers    ${crash}    0
-    Start rpu_app
+    Start Firmware Without Status Block    ${FW}
     Wait For Servod Log    parameter set loaded    2
     ${st}=    Status
     Should Be Equal    ${st}[link]    attached
