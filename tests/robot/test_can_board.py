@@ -444,7 +444,8 @@ def test_frames_live_through_the_reference_client(run: dict[str, Any]) -> None:
 
 
 def _bus_offset_us(run: dict[str, Any], b: int) -> float:
-    """The firmware's t_us (the global timer's microseconds) minus the
+    """The firmware's t_us (its time base in microseconds: the A9 global
+    timer, or the R5's cycle counter) minus the
     logger's time (us) on bus b, from the master's time stamps (PDO 0x1FF:
     the same timer in us, sent as the first frame of a cycle on an idle bus,
     so it starts on the bus when written; its start is its end minus its
