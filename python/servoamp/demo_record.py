@@ -94,6 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     mcap = out / "run.mcap"
     board = qemu.Board.load(args.board)
+    if not args.no_fault and not board.data.get("demo", {}).get("hang", True):
+        _say(f"{board.name}: no firmware hang on record (board.yaml demo.hang: its recovery is not there yet)")
+        args.no_fault = True
     images = qemu.prepare_images(board)
     _say(f"images ready ({time.monotonic() - t0:.1f} s)")
     cb = netboard.ControllerBoard(board, images, host_port=args.port or None,
