@@ -21,6 +21,7 @@ from rpu_common import REPO, parse_board_config
 from servoamp import qemu
 
 BOARD = "zynqmp_qemu"
+pytestmark = pytest.mark.on_board(BOARD)
 DTS = REPO / "boards" / BOARD / "servo.dts"
 GEN = REPO / "rpu_app" / "scripts" / "gen_board_header.py"
 
