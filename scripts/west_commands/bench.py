@@ -4,7 +4,9 @@ figure against its target.
 
     west bench                         # all of them (board ones boot QEMU)
     west bench transport motion        # some of them
-    west bench --list                  # names, host/board, duration, command
+    west bench -b zynqmp_qemu cycle    # a board benchmark on one board (-b repeatable;
+                                       # default: every board, host benchmarks once)
+    west bench --list                  # names, host/board, on which board, duration, command
     west bench --table                 # only the table of bench/results
     west bench --quick transport       # tiny configuration, build/bench/quick
 
@@ -42,8 +44,8 @@ try:
                                              formatter_class=argparse.RawDescriptionHelpFormatter,
                                              add_help=False)
             parser.add_argument("args", nargs=argparse.REMAINDER,
-                                help="NAME... and the options of scripts/bench.sh (--list, --table, "
-                                     "--quick, --results DIR, -v); -h for scripts/bench.sh's help")
+                                help="NAME... and the options of scripts/bench.sh (-b/--board NAME, --list, "
+                                     "--table, --quick, --results DIR, -v); -h for scripts/bench.sh's help")
             return parser
 
         def do_run(self, args, unknown):  # type: ignore[no-untyped-def]
