@@ -98,7 +98,7 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           ("--blocks", "300", "--arcs", "200", "--reps", "1", "--chord", "1")),
     Bench("cycle", "the cycle on the emulated board under virtual time: missed cycles, costs, latencies; "
           "cost per axis (1..8 axes at 1 and 4 kHz), the highest rate per axis count, 100,000 cycles at 4 kHz",
-          True, "about 3-4 min (one QEMU boot, about 70 s of guest time)",
+          True, "about 3-4 min per board (one QEMU boot each, about 70 s of guest time; zynqmp_qemu: 141 s on a busy host)",
           (),
           ("{python}", "bench/cycle/cycle_bench.py", "--board", "{board}", "--json", "{json}"),
           ("--seconds", "1", "--short", "0.5", "--sweep-axes", "1,8", "--sweep-rates", "1000,4000,8000",
