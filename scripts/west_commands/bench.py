@@ -40,16 +40,18 @@ try:
             super().__init__("bench", DESCRIPTION, __doc__ or "", accepts_unknown_args=True)
 
         def do_add_parser(self, parser_adder):  # type: ignore[no-untyped-def]
-            parser = parser_adder.add_parser(self.name, help=self.help, description=self.description,
-                                             formatter_class=argparse.RawDescriptionHelpFormatter,
-                                             add_help=False)
-            parser.add_argument("args", nargs=argparse.REMAINDER,
-                                help="NAME... and the options of scripts/bench.sh (-b/--board NAME, --list, "
-                                     "--table, --quick, --results DIR, -v); -h for scripts/bench.sh's help")
-            return parser
+            # No arguments of its own: everything after `west bench` (NAME...,
+            # -b/--board NAME, --list, --table, --quick, --results DIR, -v,
+            # -h for scripts/bench.sh's help) reaches scripts/bench.sh as
+            # west's unknown arguments, in the order given. (A REMAINDER
+            # positional does not take a leading option: `west bench -b X
+            # cycle` came out as `X cycle -b`.)
+            return parser_adder.add_parser(self.name, help=self.help, description=self.description,
+                                           formatter_class=argparse.RawDescriptionHelpFormatter,
+                                           add_help=False)
 
         def do_run(self, args, unknown):  # type: ignore[no-untyped-def]
-            rc = run([*args.args, *unknown])
+            rc = run(list(unknown))
             if rc:
                 sys.exit(rc)
 

@@ -289,3 +289,26 @@ def test_a_boards_own_targets_come_before_the_benchmarks(tmp_path: Path) -> None
     assert bench.find_target(t, "cycle", "max_rate_khz_8axes", "cycle").source == "a9"  # type: ignore[union-attr]
     assert bench.find_target(t, "cycle-zynqmp_qemu", "x_missed_y", "cycle").source == "design"  # type: ignore[union-attr]
     assert bench.find_target(t, "cycle-zynqmp_qemu", "x_missed_y") is None  # no benchmark: its own table only
+
+
+def test_west_bench_passes_every_argument_in_order() -> None:
+    """`west bench -b zynqmp_qemu cycle` reaches scripts/bench.sh as typed
+    (west parses its command line with parse_known_args: the command's
+    parser must leave every argument to the unknown ones, in order)."""
+    pytest.importorskip("west")
+    import argparse
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("west_bench", TOP / "scripts" / "west_commands" / "bench.py")
+    assert spec and spec.loader
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    calls: list[list[str]] = []
+    mod.run = lambda argv: calls.append(argv) or 0
+    cmd = mod.Bench()
+    top = argparse.ArgumentParser(add_help=False)
+    cmd.do_add_parser(top.add_subparsers(dest="command"))
+    for argv in (["-b", "zynqmp_qemu", "cycle"], ["--list", "-b", "zynqmp_qemu", "--board", "zynq7000_qemu"],
+                 ["--results", "x", "transport"], ["-h"], []):
+        args, unknown = top.parse_known_args(["bench", *argv])
+        cmd.do_run(args, unknown)
+        assert calls.pop() == argv
