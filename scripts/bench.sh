@@ -6,7 +6,7 @@
 # (bench/targets.toml). bench/README.md says what each benchmark measures
 # and how long it takes.
 #
-#   scripts/bench.sh                    # all of them (about 9 min, 8 QEMU boots)
+#   scripts/bench.sh                    # all of them on every board (--list: each one's duration)
 #   scripts/bench.sh transport motion   # some of them
 #   scripts/bench.sh -b zynqmp_qemu     # board benchmarks on that board only (repeatable;
 #                                       # default: every board; host ones run once)
