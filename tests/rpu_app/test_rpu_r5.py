@@ -84,6 +84,7 @@ def test_generator_picks_the_r5_platform_and_agrees_with_board_yaml(tmp_path: Pa
     (("reg = <0x00000000 0x10000>;", "reg = <0x00010000 0x10000>;"), "vectors must be at 0x0"),
     (("stats-cycles = <1000>;", "stats-cycles = <1000>;\n\t\tidle-wake-us = <10000>;"), "has none"),
     (("compatible = \"arm,cortex-r5f\";", "compatible = \"arm,cortex-m4\";"), "no platform"),
+    (("interrupts = <0 89 4>, <0 90 4>", "interrupts = <0 170 4>, <0 90 4>"), "beyond the 192 interrupt IDs"),
 ])
 def test_generator_refuses_what_an_r5_cannot_have(tmp_path: Path, edit: tuple[str, str], why: str) -> None:
     text = DTS.read_text()
