@@ -6,9 +6,11 @@
 # (bench/targets.toml). bench/README.md says what each benchmark measures
 # and how long it takes.
 #
-#   scripts/bench.sh                    # all of them (about 9 min, 8 QEMU boots)
+#   scripts/bench.sh                    # all of them on every board (--list: each one's duration)
 #   scripts/bench.sh transport motion   # some of them
-#   scripts/bench.sh --list             # names, host/board, duration, command
+#   scripts/bench.sh -b zynqmp_qemu     # board benchmarks on that board only (repeatable;
+#                                       # default: every board; host ones run once)
+#   scripts/bench.sh --list             # names, host/board, on which board, duration, command
 #   scripts/bench.sh --table            # only the table of bench/results
 #   scripts/bench.sh --quick [NAME...]  # tiny configurations into build/bench/quick
 #

@@ -1,10 +1,41 @@
 #!/usr/bin/env bash
 # The whole test suite: installs what is needed (scripts/bootstrap.sh), then
 # runs every test under tests/ with pytest (host C tests, sanitizers, the
-# stress test, the motion pipeline, and the Robot Framework suites on the
-# emulated board). Extra arguments are passed to pytest.
+# stress test, the motion pipeline, and the board tests and Robot Framework
+# suites on the emulated boards).
+#
+#   scripts/test.sh [--board NAME]... [-j N] [PYTEST ARGS...]
+#
+#   --board NAME   the emulated boards whose tests run (boards/NAME; repeat
+#                  or separate with commas); default: every board. Host
+#                  tests always run (tests/conftest.py says which test is
+#                  whose).
+#   -j N           N pytest workers (pytest-xdist, --dist loadgroup): host
+#                  tests stay in order on one worker, each board test file
+#                  and Robot suite is a group of its own, so two QEMUs run
+#                  at once (default: SERVOAMP_TEST_JOBS, else 1).
+# Other arguments go to pytest (e.g. tests/amp_lib -k unit).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"
+jobs=${SERVOAMP_TEST_JOBS:-1}
+args=()
+while [ $# -gt 0 ]; do
+	case $1 in
+	--board) [ $# -ge 2 ] || { echo "test.sh: --board wants a board name" >&2; exit 2; }
+		args+=(--board "$2"); shift 2 ;;
+	--board=*) args+=(--board "${1#--board=}"); shift ;;
+	-j) [ $# -ge 2 ] || { echo "test.sh: -j wants a number" >&2; exit 2; }
+		jobs=$2; shift 2 ;;
+	-j[0-9]*) jobs=${1#-j}; shift ;;
+	*) args+=("$1"); shift ;;
+	esac
+done
+case $jobs in
+''|*[!0-9]*|0) echo "test.sh: -j $jobs: expected a number of workers, 1 or more" >&2; exit 2 ;;
+esac
 scripts/bootstrap.sh
-exec .venv/bin/python -m pytest tests "$@"
+if [ "$jobs" -gt 1 ]; then
+	args=(-n "$jobs" --dist loadgroup "${args[@]}")
+fi
+exec .venv/bin/python -m pytest tests "${args[@]}"

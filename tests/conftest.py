@@ -1,10 +1,114 @@
 """Every test uses this tree's Python package (python/servoamp), not one
 installed elsewhere in the environment: put it first on the path before any
-test module imports ``servoamp``."""
+test module imports ``servoamp``.
+
+Boards (``scripts/test.sh --board NAME``, pytest's ``--board NAME``): a
+test that runs on an emulated board belongs to that board, and only the
+chosen boards' tests run (default: every folder of boards/ with a
+board.yaml). Host tests always run. A test's board is, in this order:
+its ``on_board(NAME)`` marker; a parameter whose value is a board's name
+(or a board object with that ``name``); its folder (tests/zynqmp,
+tests/robot/zynqmp: zynqmp_qemu); the ``zynqmp_images`` fixture; and
+otherwise, for a test marked ``board`` or using the ``images``/``board``
+fixtures, the first board, zynq7000_qemu.
+
+Two QEMUs at once (``scripts/test.sh -j 2``: pytest-xdist with
+``--dist loadgroup``): every host test is in one group, run in order on
+one worker as before (they share build/ and make's outputs); a board
+test file is a group of its own (one boot per module, as its fixtures
+want), and each Robot suite is one. -icount keeps what a guest sees
+independent of how many QEMUs share the host; the images are prepared
+under a lock (servoamp.images)."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "python"))
+
+FIRST_BOARD = "zynq7000_qemu"
+# folders whose tests all belong to one board
+BOARD_FOLDERS = {"tests/zynqmp": "zynqmp_qemu", "tests/robot/zynqmp": "zynqmp_qemu"}
+# fixtures that boot (or build the images of) one board
+BOARD_FIXTURES = {"zynqmp_images": "zynqmp_qemu", "images": FIRST_BOARD, "board": FIRST_BOARD}
+
+
+def board_names() -> list[str]:
+    """Every board: the folders of boards/ with a board.yaml."""
+    return sorted(p.parent.name for p in (REPO / "boards").glob("*/board.yaml"))
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--board", action="append", default=[], metavar="NAME",
+        help="run the tests of these emulated boards only (boards/NAME; repeat or separate with commas; "
+             "default: every board); host tests always run",
+    )
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", "on_board(name): runs on the emulated board boards/<name> "
+                                       "(selected with --board)")
+
+
+def chosen_boards(config: pytest.Config) -> list[str]:
+    names = board_names()
+    picked = [b for arg in config.getoption("board") for b in arg.split(",") if b]
+    unknown = [b for b in picked if b not in names]
+    if unknown:
+        raise pytest.UsageError(f"--board {', '.join(unknown)}: no such board (have: {', '.join(names)})")
+    return picked or names
+
+
+def item_board(item: pytest.Item, names: list[str]) -> str | None:
+    """The board ``item`` runs on, or None for a host test."""
+    mark = item.get_closest_marker("on_board")
+    if mark is not None:
+        return str(mark.args[0])
+    callspec = getattr(item, "callspec", None)
+    if callspec is not None:
+        for value in callspec.params.values():
+            name = value if isinstance(value, str) else getattr(value, "name", None)
+            if isinstance(name, str) and name in names:
+                return name
+    rel = item.path.resolve().relative_to(REPO).parent.as_posix()
+    for folder, name in BOARD_FOLDERS.items():
+        if rel == folder or rel.startswith(folder + "/"):
+            return name
+    fixtures = getattr(item, "fixturenames", ())
+    for fixture, name in BOARD_FIXTURES.items():
+        if fixture in fixtures:
+            return name
+    if item.get_closest_marker("board") is not None and not rel.startswith("tests/emulator"):
+        return FIRST_BOARD      # tests/emulator: our QEMU's own tests, every machine
+    return None
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    names = board_names()
+    chosen = chosen_boards(config)
+    keep: list[pytest.Item] = []
+    drop: list[pytest.Item] = []
+    parallel = config.pluginmanager.hasplugin("xdist")
+    for item in items:
+        board = item_board(item, names)
+        if board is not None and board not in chosen:
+            drop.append(item)
+            continue
+        keep.append(item)
+        if parallel:
+            if board is None:
+                group = "host"
+            elif item.path.suffix == ".py" and "robot_suite" in item.name:
+                group = item.nodeid           # one Robot suite, one boot
+            else:
+                group = item.path.as_posix()  # a test file: its boots share module fixtures
+            item.add_marker(pytest.mark.xdist_group(group))
+    if drop:
+        config.hook.pytest_deselected(items=drop)
+        items[:] = keep

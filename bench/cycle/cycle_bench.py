@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: MIT
 """Figures of the cycle on the emulated board (QEMU), one boot per mode.
 
-    .venv/bin/python bench/cycle/cycle_bench.py [--seconds 10] [--short 3]
+    .venv/bin/python bench/cycle/cycle_bench.py [--board zynq7000_qemu] [--seconds 10] [--short 3]
         [--modes virtual,host-single,host-multi] [--json bench/results/cycle.json]
         [--sweep-axes 1-8] [--sweep-rates 1000,2000,4000,8000] [--fit-rates 1000,4000]
         [--window-cycles 2000] [--long-cycles 100000] [--long-rate 4000] [--long-axes 8]
@@ -12,11 +12,16 @@ single-threaded TCG; every figure is in guest ns, independent of host
 load), ``host-single`` and ``host-multi`` (guest time on the host clock,
 single- or multi-threaded TCG: figures depend on the host's load).
 
-Boots zynq7000_qemu, starts servod, then rpu_app through remoteproc, and
-runs the exchange for --seconds at 1 ms and --short at 250 us (4 axes).
-Prints and stores, per period: cycles and missed cycles on each side,
-exchange counters, the per-cycle cost of the exchange on each side (servo:
-A9 global-timer ticks of 10 ns from the cycle handler's entry to commands
+Boots --board (zynq7000_qemu by default; zynqmp_qemu: the servo on R5 0),
+starts servod, then rpu_app through remoteproc, and runs the exchange for
+--seconds at 1 ms and --short at 250 us (4 axes). Results go to
+bench/results/cycle.json for zynq7000_qemu and cycle-<board>.json for any
+other board (python/servoamp/bench.py, results_stem). Prints and stores,
+per period: cycles and missed cycles on each side, exchange counters, the
+per-cycle cost of the exchange on each side (servo: ticks of the
+firmware's time base, BOARD_TIMEBASE_TICKS_PER_US from the board's servo
+devicetree: the A9's global timer at 100 per us, the R5's PMU cycle
+counter at 1000 per us; from the cycle handler's entry to commands
 consumed / control / feedback published; Linux: wake-up to commands
 published, CLOCK_MONOTONIC), the servo's interrupt entry latency and
 servod's wake-up latency histogram (interrupt event to servod running,
@@ -39,8 +44,13 @@ and 3):
 - **the long run**: --long-cycles cycles at --long-rate with --long-axes
   axes, 0 missed on both sides expected (issue 24: 100,000 at 4 kHz).
 
-Under -icount shift=0 one guest instruction is 1 ns of guest time, so the
-servo's 10 ns ticks x 10 are instructions. Both cores share that one
+Under -icount shift=N (board.yaml qemu.clock.icount) one guest
+instruction is 2^N ns of guest time, so a tick of the servo's time base is
+1000 / ticks_per_us / 2^N instructions (TimeBase): on the A9 a 10 ns tick
+is 10 instructions; on the R5, QEMU's PMCCNTR is the virtual clock in ns
+(target/arm/helper.c cycles_get_count: QEMU_CLOCK_VIRTUAL at a fixed
+ARM_CPU_FREQ of 1 GHz, the rate servo.dts gives), so a tick is one
+instruction. Both cores share that one
 instruction clock (single-threaded TCG runs them in turn): Linux's work in
 ns counts CPU0's instructions as long as CPU1 sleeps in wfi meanwhile,
 which it does in Linux's half of the cycle (docs/cycle.md, section 7).
@@ -57,6 +67,7 @@ import os
 import platform
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +75,41 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "python"))
 
 from servoamp import qemu  # noqa: E402
+from servoamp.bench import results_stem  # noqa: E402
+from servoamp.images import RPU_APP_VARIANTS  # noqa: E402
+
+GEN = REPO / "rpu_app" / "scripts"
+BOOT_TIMEOUT_S = 300.0   # host seconds to the shell (the ZynqMP's TF-A boot: 1-2 min on a busy host)
+
+
+@dataclass(frozen=True)
+class TimeBase:
+    """The servo's time base and the guest's instruction clock, from the
+    board's data: ticks_per_us is BOARD_TIMEBASE_TICKS_PER_US as
+    rpu_app's generator derives it from the servo devicetree, and
+    ns_per_instruction is 2^shift of board.yaml's qemu.clock.icount."""
+    ticks_per_us: int
+    ns_per_instruction: int
+
+    def instructions(self, ticks: float) -> float:
+        return ticks * 1000 / self.ticks_per_us / self.ns_per_instruction
+
+    def us(self, ticks: float) -> float:
+        return ticks / self.ticks_per_us
+
+    @classmethod
+    def of(cls, board: qemu.Board) -> TimeBase:
+        sys.path.insert(0, str(GEN))
+        import gen_board_header as gen  # type: ignore[import-not-found]
+
+        dts = board.folder / RPU_APP_VARIANTS[""]
+        cfg, _, _ = gen.build(dts, [gen.DEFAULT_BINDINGS], board.name)
+        icount = str(board.qemu["clock"]["icount"])
+        shift = dict(kv.split("=", 1) for kv in icount.split(",") if "=" in kv).get("shift", "")
+        if not shift.isdigit():
+            raise ValueError(f"{board.name}: qemu.clock.icount {icount!r} has no fixed shift=N: "
+                             "guest time is not a count of instructions")
+        return cls(int(cfg["BOARD_TIMEBASE_TICKS_PER_US"]), 1 << int(shift))
 
 # mode -> (guest clock, QEMU -accel)
 MODES: dict[str, tuple[str, str | None]] = {
@@ -80,7 +126,7 @@ def stats(console: qemu.Uart, prompt: str) -> dict[str, str]:
     return {l.split("=", 1)[0]: l.split("=", 1)[1] for l in out.splitlines() if "=" in l}
 
 
-def window(console: qemu.Uart, prompt: str, seconds: float) -> dict[str, object]:
+def window(console: qemu.Uart, prompt: str, seconds: float, tb: TimeBase) -> dict[str, object]:
     a = stats(console, prompt)
     t0 = time.monotonic()
     qemu.run_shell(console, f"sleep {seconds}", prompt, timeout=seconds * 10 + 30)
@@ -111,7 +157,8 @@ def window(console: qemu.Uart, prompt: str, seconds: float) -> dict[str, object]
             "cycles": d["servo.cycles"], "missed": d["servo.missed"],
             "miss_rate_pct": round(100.0 * d["servo.missed"] / max(1, d["servo.cycles"] + d["servo.missed"]), 3),
             "commands": {k: d[f"servo.cmd_{k}"] for k in ("fresh", "stale", "torn", "missed", "invalid")},
-            "cost_ticks_10ns_since_start": {
+            "ticks_per_us": tb.ticks_per_us,
+            "cost_ticks_since_start": {
                 p: {"mean": d[f"servo.{p}_ticks.mean"], "max": d[f"servo.{p}_ticks.max"]}
                 for p in ("rx", "ctrl", "tx", "cycle")},
             "irq_entry_latency_ns_max_since_start": d["servo.irq_lat_ns.max"],
@@ -124,7 +171,7 @@ def window(console: qemu.Uart, prompt: str, seconds: float) -> dict[str, object]
 SETTLE_S = 0.2     # after a change of axes or period, before a window opens
 
 
-def point(console: qemu.Uart, prompt: str, axes: int, rate_hz: int, cycles: int) -> dict[str, Any]:
+def point(console: qemu.Uart, prompt: str, axes: int, rate_hz: int, cycles: int, tb: TimeBase) -> dict[str, Any]:
     """One point of the sweep: axes and rate set, then a window of cycles.
     Counters are the window's (differences of two ``ampctl stats``); the
     servo's costs are since the change (the firmware starts them again
@@ -163,9 +210,9 @@ def point(console: qemu.Uart, prompt: str, axes: int, rate_hz: int, cycles: int)
                   "cmd_stale": d("servo.cmd_stale"), "axes": int(b["servo.axes"], 0),
                   "period_us": int(b["servo.period_us"], 0),
                   "cost_samples": int(b["servo.cost_samples"], 0),
-                  # instructions (10 ns ticks x 10), since the change
-                  "instructions": {p: {"mean": int(b[f"servo.{p}_ticks.mean"], 0) * 10,
-                                       "max": int(b[f"servo.{p}_ticks.max"], 0) * 10}
+                  # instructions (TimeBase: ticks of the servo's time base), since the change
+                  "instructions": {p: {"mean": round(tb.instructions(int(b[f"servo.{p}_ticks.mean"], 0))),
+                                       "max": round(tb.instructions(int(b[f"servo.{p}_ticks.max"], 0)))}
                                    for p in ("rx", "ctrl", "tx", "cycle")},
                   "irq_entry_latency_ns_max": int(b["servo.irq_lat_ns.max"], 0)},
     })
@@ -216,11 +263,12 @@ def rate_table(points: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
-def sweep(console: qemu.Uart, prompt: str, axes: list[int], rates: list[int], cycles: int) -> list[dict[str, Any]]:
+def sweep(console: qemu.Uart, prompt: str, axes: list[int], rates: list[int], cycles: int,
+          tb: TimeBase) -> list[dict[str, Any]]:
     pts = []
     for n in axes:
         for r in sorted(rates):
-            p = point(console, prompt, n, r, cycles)
+            p = point(console, prompt, n, r, cycles, tb)
             pts.append(p)
             if "refused" in p:
                 print(f"[sweep {n} axes {r / 1000:g} kHz] refused: {p['refused']}", flush=True)
@@ -237,7 +285,7 @@ def sweep(console: qemu.Uart, prompt: str, axes: list[int], rates: list[int], cy
 def start_cycle(m: qemu.QemuMachine, prompt: str) -> qemu.Uart:
     """Boot to the shell, servod, the firmware through remoteproc, the
     exchange running (watchdog 50 cycles, as the suite has it)."""
-    qemu.boot_to_shell(m, timeout=90)
+    qemu.boot_to_shell(m, timeout=BOOT_TIMEOUT_S)
     c = m.uart(0)
 
     def sh(cmd: str) -> None:
@@ -253,7 +301,7 @@ def start_cycle(m: qemu.QemuMachine, prompt: str) -> qemu.Uart:
 
 
 def run_mode(board: qemu.Board, images: qemu.Images, clock: str, accel: str | None, seconds: float,
-             short: float, sw: argparse.Namespace | None = None) -> dict[str, object]:
+             short: float, tb: TimeBase, sw: argparse.Namespace | None = None) -> dict[str, object]:
     """One boot: the 1 ms and 250 us windows (4 axes); with sw (virtual
     time only) the sweep and the long run after them."""
     prompt = str(board.data["linux"]["prompt"])
@@ -266,21 +314,21 @@ def run_mode(board: qemu.Board, images: qemu.Images, clock: str, accel: str | No
 
         out: dict[str, object] = {}
         if seconds > 0:
-            out["1000us"] = window(c, prompt, seconds)
+            out["1000us"] = window(c, prompt, seconds, tb)
         if short > 0:
             sh("ampctl param set cycle_period_us 250; sleep 0.2")
-            out["250us"] = window(c, prompt, short)
+            out["250us"] = window(c, prompt, short, tb)
             sh("ampctl param set cycle_period_us 1000")
         if sw is not None and sw.sweep_axes:
             t0 = time.monotonic()
-            pts = sweep(c, prompt, sw.sweep_axes, sw.sweep_rates, sw.window_cycles)
+            pts = sweep(c, prompt, sw.sweep_axes, sw.sweep_rates, sw.window_cycles, tb)
             out["sweep"] = {"window_cycles": sw.window_cycles, "settle_s": SETTLE_S,
                             "host_seconds": round(time.monotonic() - t0, 1), "points": pts,
                             "fits": {f"{r}hz": fits(pts, r) for r in sw.fit_rates},
                             "max_rate_hz": rate_table(pts)}
         if sw is not None and sw.long_cycles:
             t0 = time.monotonic()
-            p = point(c, prompt, sw.long_axes, sw.long_rate, sw.long_cycles)
+            p = point(c, prompt, sw.long_axes, sw.long_rate, sw.long_cycles, tb)
             p["host_seconds"] = round(time.monotonic() - t0, 1)
             out["long"] = p
         sh("ampctl param set axes 4; ampctl param set cycle_period_us 1000")
@@ -300,12 +348,16 @@ def run_info(board: qemu.Board, script: str) -> dict[str, object]:
 def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
     """The summary table's figures (bench/README.md); targets in bench/targets.toml."""
     out: list[dict[str, Any]] = []
+    ns_per_instr = int(result.get("timebase", {}).get("ns_per_instruction", 1))
     for mode, m in result["modes"].items():
         out += sweep_figures(m)
         for per, w in m.items():
             if not isinstance(w, dict) or "linux" not in w or per == "long":
                 continue
             lin, srv = w["linux"], w["servo"]
+            # results from before --board carry A9 ticks of 10 ns under their own key
+            tb = TimeBase(int(srv.get("ticks_per_us", 100)), ns_per_instr)
+            cost = srv.get("cost_ticks_since_start") or srv["cost_ticks_10ns_since_start"]
             k = f"{mode}_{per}"
             out += [
                 {"name": f"{k}_missed_linux", "value": lin["missed"], "unit": "cycles", "better": "lower",
@@ -319,21 +371,20 @@ def figures(result: dict[str, Any]) -> list[dict[str, Any]]:
                  "value": round(lin["wake_latency_ns_since_start"]["max"] / 1000, 2),
                  "note": f"mean {lin['wake_latency_ns_since_start']['mean'] / 1000:.1f} us"},
                 {"name": f"{k}_servo_handler_max", "unit": "us", "better": "lower",
-                 "value": round(srv["cost_ticks_10ns_since_start"]["cycle"]["max"] / 100, 2),
-                 "note": f"mean {srv['cost_ticks_10ns_since_start']['cycle']['mean'] / 100:.1f} us"},
+                 "value": round(tb.us(cost["cycle"]["max"]), 2),
+                 "note": f"mean {tb.us(cost['cycle']['mean']):.1f} us"},
             ]
-            # per stage in instructions: under -icount shift=0 one instruction
-            # is 1 ns of guest time, and the firmware counts in 10 ns ticks
+            # per stage in instructions (TimeBase: -icount makes guest time a
+            # count of instructions; the firmware counts ticks of its time base)
             if mode == "virtual":
-                cost = srv["cost_ticks_10ns_since_start"]
                 for stage in ("rx", "ctrl", "tx", "cycle"):
                     out.append({"name": f"{k}_servo_{stage}_instructions", "unit": "instr",
-                                "better": "lower", "value": cost[stage]["mean"] * 10,
-                                "note": f"mean; max {cost[stage]['max'] * 10} since the start or the last "
-                                        "change of axes or period"})
+                                "better": "lower", "value": round(tb.instructions(cost[stage]["mean"])),
+                                "note": f"mean; max {round(tb.instructions(cost[stage]['max']))} since the start "
+                                        "or the last change of axes or period"})
                 axes = srv.get("axes") or 1
                 out.append({"name": f"{k}_servo_ctrl_instructions_per_axis", "unit": "instr",
-                            "better": "lower", "value": round(cost["ctrl"]["mean"] * 10 / axes),
+                            "better": "lower", "value": round(tb.instructions(cost["ctrl"]["mean"]) / axes),
                             "note": f"ctrl mean / {axes} axes (4 sub-steps each): an upper bound "
                                     "on the per-axis slope"})
     return out
@@ -456,7 +507,9 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--short", type=float, default=3.0)
     ap.add_argument("--modes", default="virtual")
-    ap.add_argument("--json", type=Path, default=REPO / "bench/results/cycle.json")
+    ap.add_argument("--board", default="zynq7000_qemu", help="the board folder under boards/ (default zynq7000_qemu)")
+    ap.add_argument("--json", type=Path, help="results file (default bench/results/cycle.json for zynq7000_qemu, "
+                                              "cycle-<board>.json for another board)")
     ap.add_argument("--sweep-axes", type=axes_list, default=list(range(1, 9)),
                     help="axis counts of the sweep ('1-8', '1,4,8', '' for no sweep)")
     ap.add_argument("--sweep-rates", type=lambda t: [int(x) for x in t.split(",")], default=[1000, 2000, 4000, 8000],
@@ -471,18 +524,28 @@ def main() -> int:
     for r in args.sweep_rates + [args.long_rate]:
         if not 100 <= r <= 8000:
             ap.error(f"rate {r} Hz: the period must be within 125..10000 us")
-    board = qemu.Board.load("zynq7000_qemu")
+    if not (REPO / "boards" / args.board / "board.yaml").exists():
+        ap.error(f"--board {args.board}: no boards/{args.board}/board.yaml")
+    board = qemu.Board.load(args.board)
+    if args.json is None:
+        args.json = REPO / "bench" / "results" / f"{results_stem('cycle', board.name)}.json"
+    tb = TimeBase.of(board)
     images = qemu.prepare_images(board)
     result: dict[str, object] = {
         **run_info(board, "cycle_bench.py"),
-        "note": "QEMU TCG on a shared host: emulator figures, not Zynq-7000 hardware figures",
+        "board": board.name,
+        "timebase": {"ticks_per_us": tb.ticks_per_us, "ns_per_instruction": tb.ns_per_instruction,
+                     "source": f"BOARD_TIMEBASE_TICKS_PER_US of boards/{board.name}/{RPU_APP_VARIANTS['']}; "
+                               f"qemu.clock.icount of boards/{board.name}/board.yaml"},
+        "note": f"QEMU TCG on a shared host: emulator figures, not {board.name} hardware figures "
+                "(no caches or pipeline modelled: one instruction per ns of guest time)",
         "modes": {},
     }
     for mode in args.modes.split(","):
         if mode not in MODES:
             ap.error(f"--modes: {mode!r} is not one of {', '.join(MODES)}")
         clock, accel = MODES[mode]
-        r = run_mode(board, images, clock, accel, args.seconds, args.short, args if mode == "virtual" else None)
+        r = run_mode(board, images, clock, accel, args.seconds, args.short, tb, args if mode == "virtual" else None)
         result["modes"][mode] = {  # type: ignore[index]
             "clock": " ".join(qemu.clock_args(board, clock)) or "host",
             "accel": accel or "tcg (multi-threaded, default)", **r}
@@ -494,8 +557,8 @@ def main() -> int:
                   f"servo cycles {srv['cycles']} missed {srv['missed']} ({srv['miss_rate_pct']} %), "
                   f"fb torn/invalid {lin['feedback']['torn']}/{lin['feedback']['invalid']}, "
                   f"cmd torn/invalid {srv['commands']['torn']}/{srv['commands']['invalid']}")
-            cost = srv["cost_ticks_10ns_since_start"]
-            print(f"                servo cost (10 ns ticks, mean/max): irq entry->commands consumed "
+            cost = srv["cost_ticks_since_start"]
+            print(f"                servo cost ({tb.ticks_per_us} ticks per us, mean/max): irq entry->commands consumed "
                   f"{cost['rx']['mean']}/{cost['rx']['max']}, control {cost['ctrl']['mean']}/{cost['ctrl']['max']}, "
                   f"feedback {cost['tx']['mean']}/{cost['tx']['max']}, whole {cost['cycle']['mean']}/{cost['cycle']['max']}")
             print(f"                servod: wake-up latency ns {lin['wake_latency_ns_since_start']}, "

@@ -24,7 +24,8 @@
 #   qemu-src/apt/                         the private APT state
 #   qemu/<key>/bin/qemu-system-aarch64    the install (prefix)
 #   qemu/<key>/libexec/servoamp/          the qtest binaries (TTC, CAN, canlink,
-#                                         ZynqMP RPU, upstream's xlnx-can-test)
+#                                         ZynqMP RPU, the ZCU102's PL timer,
+#                                         upstream's xlnx-can-test)
 #   qemu/<key>/info, build.log, ok        results (ok = complete, the
 #                                         qtests passed)
 #   qemu/<key>/src, build                 patched source and build tree, removed
@@ -74,7 +75,8 @@ config_opts=(
 )
 # ninja targets: the emulators, what `meson install` needs, our qtests
 # (run-regression-test.sh knows which emulator each qtest runs on)
-qtests=(cadence-ttc-test zynq-can-test can-lockstep-test xlnx-zynqmp-rpu-test xlnx-can-test)
+qtests=(cadence-ttc-test zynq-can-test can-lockstep-test xlnx-zynqmp-rpu-test
+	xlnx-zcu102-pl-timer-test xlnx-can-test)
 targets=(qemu-system-aarch64 trace/trace-events-all "${qtests[@]/#/tests/qtest/}")
 
 log() { printf '[qemu] %s\n' "$*" >&2; }

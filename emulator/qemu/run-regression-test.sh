@@ -5,7 +5,9 @@
 # tests/qtest/zynq-can-test.c), or with --test can-lockstep-test the
 # canlink backend's (patches/0010, tests/qtest/can-lockstep-test.c), or with
 # --test xlnx-zynqmp-rpu-test the ZynqMP RPU's (patches/0014-0023,
-# tests/qtest/xlnx-zynqmp-rpu-test.c), or with --test xlnx-can-test
+# tests/qtest/xlnx-zynqmp-rpu-test.c), or with --test
+# xlnx-zcu102-pl-timer-test the ZCU102's timer in the PL (patches/0027,
+# tests/qtest/xlnx-zcu102-pl-timer-test.c), or with --test xlnx-can-test
 # upstream's qtest of the ZynqMP's CAN controllers (its status checks
 # adjusted by patches/0011); all on qemu-system-aarch64, the one emulator
 # of both boards (patches/0026 registers the Zynq-7000 tests for it).
@@ -22,6 +24,7 @@
 #   emulator/qemu/run-regression-test.sh [DIR] --test zynq-can-test
 #   emulator/qemu/run-regression-test.sh [DIR] --test can-lockstep-test
 #   emulator/qemu/run-regression-test.sh [DIR] --test xlnx-zynqmp-rpu-test
+#   emulator/qemu/run-regression-test.sh [DIR] --test xlnx-zcu102-pl-timer-test
 #   emulator/qemu/run-regression-test.sh [DIR] --test xlnx-can-test
 #
 # Environment: SERVOAMP_QEMU_TEST_TIMEOUT (seconds, default 60; the TTC test
@@ -37,7 +40,7 @@ while [ $# -gt 0 ]; do
 	case $1 in
 	--qemu) qemu=${2:?--qemu needs a path}; shift 2 ;;
 	--test) test=${2:?--test needs a name}; shift 2 ;;
-	-h | --help) sed -n '2,28p' "$0"; exit 0 ;;
+	-h | --help) sed -n '2,31p' "$0"; exit 0 ;;
 	*) [ -z "$dir" ] || die "one directory only"; dir=$1; shift ;;
 	esac
 done
@@ -46,7 +49,7 @@ dir=$(cd "$dir" && pwd)
 
 test_bin=""
 case $test in
-*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test, can-lockstep-test, xlnx-zynqmp-rpu-test, xlnx-can-test)" ;;
+*/* | "") die "--test takes a qtest's name (cadence-ttc-test, zynq-can-test, can-lockstep-test, xlnx-zynqmp-rpu-test, xlnx-zcu102-pl-timer-test, xlnx-can-test)" ;;
 esac
 # the emulator every qtest runs on (both boards' machines are in it)
 emu=qemu-system-aarch64

@@ -2,12 +2,23 @@
 """servoamp's benchmarks behind one entry point, and their summary table.
 
     scripts/bench.sh [NAME...]          # run (all when no NAME), then the table
-    scripts/bench.sh --list             # what exists, how long each takes
+    scripts/bench.sh -b zynqmp_qemu     # the board benchmarks on that board only
+    scripts/bench.sh --list [-b NAME]   # what exists, on which board, how long each takes
     scripts/bench.sh --table [NAME...]  # only the table, from bench/results
     scripts/bench.sh --quick [NAME...]  # tiny configurations into build/bench/quick
     west bench ...                      # the same
 
-Each benchmark writes bench/results/<name>.json. Every results file carries
+Boards: a host benchmark runs once; a board benchmark once per board it
+has been ported to (every board under boards/ by default, -b/--board NAME,
+repeatable, to choose). One that cannot run on a chosen board yet is
+skipped with the reason (--list gives it too).
+
+Each benchmark writes bench/results/<name>.json (a host benchmark, or a
+board benchmark on zynq7000_qemu, the first board) or
+bench/results/<name>-<board>.json (a board benchmark on another board;
+results_stem). Targets: bench/targets.toml's [<name>] table holds the
+design's targets for every board; a [<name>-<board>] table, when there is
+one, comes first for that board. Every results file carries
 a "figures" list (bench/figures.schema.json); the table shows each figure
 against its target from bench/targets.toml (or the figure's own "target"),
 with the ratio value/target and pass/fail. A results file that no
@@ -52,10 +63,20 @@ class Bench:
     run: tuple[str, ...]         # {python} and {json} are substituted
     quick: tuple[str, ...]       # extra arguments for --quick
     needs: str = ""              # a file that must exist (optional benchmarks)
+    # a board benchmark: the boards it runs on ({board} in run is the
+    # board's name), and why it cannot run on the others yet
+    boards: tuple[str, ...] = ()
+    not_yet: str = ""
 
-    def command(self, json_path: Path, quick: bool) -> list[str]:
-        args = [a.format(python=sys.executable, json=str(json_path)) for a in self.run]
+    def command(self, json_path: Path, quick: bool, board: str | None = None) -> list[str]:
+        args = [a.format(python=sys.executable, json=str(json_path), board=board or "") for a in self.run]
         return args + (list(self.quick) if quick else [])
+
+    def why_not(self, board: str) -> str | None:
+        """None if this board benchmark runs on ``board``, else the reason."""
+        if board in self.boards:
+            return None
+        return self.not_yet or f"not ported to {board}"
 
 
 BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
@@ -77,28 +98,37 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           ("--blocks", "300", "--arcs", "200", "--reps", "1", "--chord", "1")),
     Bench("cycle", "the cycle on the emulated board under virtual time: missed cycles, costs, latencies; "
           "cost per axis (1..8 axes at 1 and 4 kHz), the highest rate per axis count, 100,000 cycles at 4 kHz",
-          True, "about 3-4 min (one QEMU boot, about 70 s of guest time)",
+          True, "about 3-4 min per board (one QEMU boot each, about 70 s of guest time; zynqmp_qemu: 141 s on a busy host)",
           (),
-          ("{python}", "bench/cycle/cycle_bench.py", "--json", "{json}"),
+          ("{python}", "bench/cycle/cycle_bench.py", "--board", "{board}", "--json", "{json}"),
           ("--seconds", "1", "--short", "0.5", "--sweep-axes", "1,8", "--sweep-rates", "1000,4000,8000",
-           "--window-cycles", "300", "--long-cycles", "2000")),
+           "--window-cycles", "300", "--long-cycles", "2000"),
+          boards=("zynq7000_qemu", "zynqmp_qemu")),
     Bench("determinism", "the same recorded scenario on a quiet and a loaded host (virtual time)",
           True, "about 1.5 min (three QEMU boots, 8000 cycles recorded each)",
           (),
           ("{python}", "bench/cycle/determinism_bench.py", "--json", "{json}"),
-          ("--cycles", "300", "--runs", "quiet")),
+          ("--cycles", "300", "--runs", "quiet"),
+          boards=("zynq7000_qemu",),
+          not_yet="not yet: determinism_bench.py boots zynq7000_qemu only (the board is fixed in the script)"),
     Bench("fieldbus", "CiA 402 drives on CAN (firmware in QEMU, drive simulators in lockstep): "
           "bus load per cycle, highest drives x rate per bus with 0 SYNC missed",
           True, "about 3 min (4 QEMU boots; the first run builds the firmware variants)",
           (),
           ("{python}", "bench/fieldbus/can_bench.py", "--json", "{json}"),
-          ("--quick",)),
+          ("--quick",),
+          boards=("zynq7000_qemu",),
+          not_yet="not yet: can_bench.py builds its firmware from overlays of boards/zynq7000_qemu/"
+                  "servo.dts only (the board is fixed in the script; the ZynqMP's CAN: issue 35 item 4)"),
     Bench("rt_latency", "servod's wake-up and cyclictest on both kernels (vanilla, PREEMPT_RT) at 1 and 4 kHz, "
           "idle and under hackbench, a CPU hog, bulk TCP and a recovery (virtual time)",
           True, "about 20 min at 10,000 cycles per window (two kernel boots, 20 windows; 100,000: about 4.7 h of one core, --jobs 2 --resume)",
           (),
           ("{python}", "bench/cycle/rt_latency_bench.py", "--json", "{json}"),
-          ("--cycles", "500", "--loads", "idle,cpu")),
+          ("--cycles", "500", "--loads", "idle,cpu"),
+          boards=("zynq7000_qemu",),
+          not_yet="not yet: rt_latency_bench.py boots zynq7000_qemu's two kernels only (the A53 RT "
+                  "kernel's table is issue 35 item 5)"),
     Bench("recorder", "recording encodings, JSON (servoamp record) vs protobuf (servoamp bridge, foxglove-sdk): "
           "bytes/cycle, CPU per 1000 cycles, max rate x axes at 4 and 8 axes",
           False, "about 2-3 min (one rate ramp per encoding and axis count)",
@@ -110,6 +140,26 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
 
 
 # ---- results and targets ------------------------------------------------
+
+FIRST_BOARD = "zynq7000_qemu"   # the board every board benchmark ran on first
+
+
+BOARDS = REPO / "boards"
+
+
+def known_boards(root: Path = BOARDS) -> list[str]:
+    """Every board folder (boards/<name>/board.yaml), the first board first."""
+    names = sorted(p.parent.name for p in root.glob("*/board.yaml"))
+    return sorted(names, key=lambda n: n != FIRST_BOARD)
+
+
+def results_stem(name: str, board: str | None) -> str:
+    """The results file's stem of benchmark ``name`` on ``board``: the
+    name alone for a host benchmark and for the first board (the files
+    from before there were two keep their names), ``<name>-<board>`` for
+    any other board (bench/results/cycle-zynqmp_qemu.json)."""
+    return name if board in (None, FIRST_BOARD) else f"{name}-{board}"
+
 
 @dataclass
 class Target:
@@ -136,13 +186,18 @@ def load_targets(path: Path = TARGETS) -> dict[str, dict[str, Target]]:
     return out
 
 
-def find_target(targets: dict[str, dict[str, Target]], stem: str, name: str) -> Target | None:
-    figs = targets.get(stem, {})
-    if name in figs:
-        return figs[name]
-    for pattern, t in figs.items():
-        if fnmatch.fnmatchcase(name, pattern):
-            return t
+def find_target(targets: dict[str, dict[str, Target]], stem: str, name: str,
+                bench: str | None = None) -> Target | None:
+    """The target of figure ``name`` in results file ``stem``: from the
+    file's own table ([cycle-zynqmp_qemu]) first, then from its benchmark's
+    ([cycle]: the design's targets, for every board)."""
+    for table in dict.fromkeys((stem, bench or stem)):
+        figs = targets.get(table, {})
+        if name in figs:
+            return figs[name]
+        for pattern, t in figs.items():
+            if fnmatch.fnmatchcase(name, pattern):
+                return t
     return None
 
 
@@ -170,6 +225,7 @@ class Row:
     source: str | None
     spread: dict[str, float] | None
     note: str
+    board: str = "host"
 
     @property
     def status(self) -> str:
@@ -187,22 +243,37 @@ class Row:
         return self.value / self.target
 
 
-def rows_of(stem: str, path: Path, targets: dict[str, dict[str, Target]]) -> list[Row]:
+def split_stem(stem: str, boards: list[str]) -> tuple[str, str]:
+    """A results file's stem -> (benchmark, board): ``cycle-zynqmp_qemu``
+    -> (cycle, zynqmp_qemu); a board benchmark's plain stem is its first
+    board's; anything else is "host"."""
+    for b in boards:
+        if stem.endswith(f"-{b}") and stem != f"-{b}":
+            return stem[:-len(b) - 1], b
+    bench = BENCHMARKS.get(stem)
+    return stem, (FIRST_BOARD if bench is not None and bench.board else "host")
+
+
+def rows_of(stem: str, path: Path, targets: dict[str, dict[str, Target]],
+            boards: list[str] | None = None) -> list[Row]:
+    name, board = split_stem(stem, known_boards() if boards is None else boards)
     try:
         doc = json.loads(path.read_text())
     except (OSError, ValueError) as e:
-        return [Row(stem, "(unreadable)", None, "", "lower", None, None, None, str(e))]
+        return [Row(name, "(unreadable)", None, "", "lower", None, None, None, str(e), board)]
     errors = validate(doc)
     if errors:
-        return [Row(stem, "(schema)", None, "", "lower", None, None, None, e) for e in errors]
+        return [Row(name, "(schema)", None, "", "lower", None, None, None, e, board) for e in errors]
+    if isinstance(doc.get("board"), str):
+        board = doc["board"]
     rows = []
     for f in doc["figures"]:
-        t = find_target(targets, stem, f["name"])
-        rows.append(Row(stem, f["name"], float(f["value"]), f["unit"],
+        t = find_target(targets, stem, f["name"], name)
+        rows.append(Row(name, f["name"], float(f["value"]), f["unit"],
                         (t.better if t and t.better else f["better"]),
                         t.value if t else f.get("target"),
                         t.source if t else f.get("target_source", "results file" if "target" in f else None),
-                        f.get("spread"), f.get("note", "")))
+                        f.get("spread"), f.get("note", ""), board))
     return rows
 
 
@@ -226,7 +297,7 @@ def fmt(v: float | None) -> str:
 def table(rows: list[Row]) -> str:
     sources: list[str] = []
     lines = []
-    head = ("bench", "figure", "value", "unit", "target", "ratio", "status", "spread / note")
+    head = ("bench", "board", "figure", "value", "unit", "target", "ratio", "status", "spread / note")
     cells = []
     for r in rows:
         tgt = "-"
@@ -245,11 +316,11 @@ def table(rows: list[Row]) -> str:
                 parts.append(f"min-max {fmt(lo)}-{fmt(hi)}")
             spread = ", ".join(parts)
         note = "; ".join(p for p in (spread, r.note) if p)
-        cells.append((r.bench, r.name, fmt(r.value), r.unit, tgt,
+        cells.append((r.bench, r.board, r.name, fmt(r.value), r.unit, tgt,
                       "-" if r.ratio is None else f"{r.ratio:.2f}", r.status, note))
     widths = [max(len(c[i]) for c in [head, *cells]) for i in range(len(head) - 1)]
     for c in [head, *cells]:
-        lines.append("  ".join(s.ljust(w) if i in (0, 1, 3, 4, 6) else s.rjust(w)
+        lines.append("  ".join(s.ljust(w) if i in (0, 1, 2, 4, 5, 7) else s.rjust(w)
                                for i, (s, w) in enumerate(zip(c[:-1], widths))) + "  " + c[-1])
     lines.insert(1, "-" * max(len(l) for l in lines))
     met = sum(r.status == "pass" for r in rows)
@@ -263,12 +334,28 @@ def table(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
-def result_files(results: Path, names: list[str]) -> list[tuple[str, Path]]:
-    if names:
-        return [(n, results / f"{n}.json") for n in names if (results / f"{n}.json").exists()]
+def result_files(results: Path, names: list[str], boards: list[str] | None = None,
+                 known: list[str] | None = None) -> list[tuple[str, Path]]:
+    """The results files of the table, as (stem, path): those of ``names``
+    (every file when empty), a board benchmark's only on ``boards`` (all
+    when None); in BENCHMARKS' order, each benchmark's boards in order."""
+    known = known_boards() if known is None else known
     found = {p.stem: p for p in sorted(results.glob("*.json"))}
-    order = [n for n in BENCHMARKS if n in found] + [n for n in found if n not in BENCHMARKS]
-    return [(n, found[n]) for n in order]
+    out = []
+    for stem, path in found.items():
+        name, board = split_stem(stem, known)
+        if names and name not in names and stem not in names:
+            continue
+        if boards is not None and board != "host" and board not in boards:
+            continue
+        out.append((stem, path))
+    order = list(BENCHMARKS)
+
+    def key(item: tuple[str, Path]) -> tuple[int, str, int]:
+        name, board = split_stem(item[0], known)
+        return (order.index(name) if name in order else len(order), name,
+                known.index(board) if board in known else -1)
+    return sorted(out, key=key)
 
 
 # ---- running ----------------------------------------------------------------
@@ -316,18 +403,19 @@ def stamp_host(path: Path) -> None:
         path.write_text(json.dumps(doc, indent=1) + "\n")
 
 
-def run_bench(b: Bench, results: Path, quick: bool, verbose: bool) -> tuple[bool, str]:
+def run_bench(b: Bench, results: Path, quick: bool, verbose: bool, board: str | None = None) -> tuple[bool, str]:
     if b.needs and not (REPO / b.needs).exists():
         return True, f"skipped: {b.needs} does not exist yet"
+    stem = results_stem(b.name, board)
     LOGS.mkdir(parents=True, exist_ok=True)
-    log = LOGS / f"{b.name}{'-quick' if quick else ''}.log"
+    log = LOGS / f"{stem}{'-quick' if quick else ''}.log"
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO / "python"), env.get("PYTHONPATH", "")) if p)
     results.mkdir(parents=True, exist_ok=True)
-    out = results / f"{b.name}.json"
+    out = results / f"{stem}.json"
     t0 = time.monotonic()
     with log.open("w") as lf:
-        for cmd in (*b.build, tuple(b.command(out, quick))):
+        for cmd in (*b.build, tuple(b.command(out, quick, board))):
             lf.write(f"$ {' '.join(cmd)}\n")
             lf.flush()
             if verbose:
@@ -354,10 +442,43 @@ def needs_board(names: list[str]) -> bool:
     return any(BENCHMARKS[n].board for n in (names or list(BENCHMARKS)) if n in BENCHMARKS)
 
 
+def plan(names: list[str], boards: list[str]) -> list[tuple[Bench, str | None, str | None]]:
+    """What a run does, in order: (benchmark, board or None for a host
+    benchmark, None to run or the reason it is skipped)."""
+    out: list[tuple[Bench, str | None, str | None]] = []
+    for n in names or list(BENCHMARKS):
+        b = BENCHMARKS[n]
+        if not b.board:
+            out.append((b, None, None))
+            continue
+        out += [(b, board, b.why_not(board)) for board in boards]
+    return out
+
+
+def list_text(boards: list[str]) -> str:
+    """--list: each benchmark, host or board, how long, and on each board
+    whether it runs there (and why not)."""
+    lines = []
+    for b in BENCHMARKS.values():
+        state = "" if not b.needs or (REPO / b.needs).exists() else f" (not present: {b.needs})"
+        lines.append(f"{b.name:<12} {'board' if b.board else 'host':<5} {b.duration}{state}")
+        lines.append(f"{'':<12} {b.what}")
+        if b.board:
+            for board in boards:
+                why = b.why_not(board)
+                lines.append(f"{'':<12} on {board}: " + (f"runs ({results_stem(b.name, board)}.json)"
+                                                         if why is None else f"skipped: {why}"))
+        lines.append(f"{'':<12} $ {' '.join(b.run)}")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="bench", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("names", nargs="*", metavar="NAME", help="benchmarks to run (default: all); see --list")
+    ap.add_argument("-b", "--board", action="append", metavar="BOARD", dest="boards",
+                    help="run the board benchmarks on this board (repeatable; default: every board under "
+                         "boards/); host benchmarks run once whatever the boards")
     ap.add_argument("--list", action="store_true", help="list the benchmarks and exit")
     ap.add_argument("--table", action="store_true", help="run nothing: the table of the results there are")
     ap.add_argument("--quick", action="store_true",
@@ -367,15 +488,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("-v", "--verbose", action="store_true", help="show the benchmarks' own output")
     ap.add_argument("--scope", action="store_true", help=argparse.SUPPRESS)  # for scripts/bench.sh
     args = ap.parse_args(argv)
+    known = known_boards()
+    bad = [b for b in args.boards or [] if b not in known]
+    if bad:
+        ap.error(f"unknown board {', '.join(bad)} (boards: {', '.join(known)}; each a folder boards/NAME "
+                 "with a board.yaml)")
+    boards = list(dict.fromkeys(args.boards)) if args.boards else known
 
     if args.scope:  # which bootstrap the selection needs
         print("all" if not (args.list or args.table) and needs_board(args.names) else "host")
         return 0
     if args.list:
-        for b in BENCHMARKS.values():
-            state = "" if not b.needs or (REPO / b.needs).exists() else f" (not present: {b.needs})"
-            print(f"{b.name:<12} {'board' if b.board else 'host':<5} {b.duration}{state}\n"
-                  f"{'':<12} {b.what}\n{'':<12} $ {' '.join(b.run)}")
+        print(list_text(boards))
         return 0
     results = args.results or (QUICK_RESULTS if args.quick else RESULTS)
     results = results if results.is_absolute() else Path.cwd() / results
@@ -384,21 +508,26 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown benchmark {', '.join(unknown)} (known: {', '.join(BENCHMARKS)})")
     rc = 0
     if not args.table:
-        for n in args.names or list(BENCHMARKS):
+        for n in args.names:
             if n not in BENCHMARKS:
                 print(f"[bench] {n}: no runner here; showing {results / (n + '.json')}")
+        selected = [n for n in args.names if n in BENCHMARKS]
+        for b, board, why in plan(selected, boards) if selected or not args.names else []:
+            tag = b.name if board is None else f"{b.name} on {board}"
+            if why is not None:
+                print(f"[bench] {tag}: skipped: {why}", flush=True)
                 continue
-            b = BENCHMARKS[n]
-            print(f"[bench] {n}: running ({b.duration}{', boots QEMU' if b.board else ''})", flush=True)
-            ok, msg = run_bench(b, results, args.quick, args.verbose)
-            print(f"[bench] {n}: {msg}", flush=True)
+            print(f"[bench] {tag}: running ({b.duration}{', boots QEMU' if b.board else ''})", flush=True)
+            ok, msg = run_bench(b, results, args.quick, args.verbose, board)
+            print(f"[bench] {tag}: {msg}", flush=True)
             rc |= 0 if ok else 1
     try:
         targets = load_targets()
     except (OSError, ValueError) as e:
         print(f"[bench] {e}", file=sys.stderr)
         return 1
-    rows = [r for stem, path in result_files(results, args.names) for r in rows_of(stem, path, targets)]
+    rows = [r for stem, path in result_files(results, args.names, boards if args.boards else None, known)
+            for r in rows_of(stem, path, targets, known)]
     print()
     print(f"results: {results}" + ("  (--quick: smoke-run sizes, the figures mean nothing)" if args.quick else ""))
     print(table(rows))

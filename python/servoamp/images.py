@@ -4,10 +4,12 @@ launcher that :mod:`servoamp.qemu` re-exports."""
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import shutil
 import subprocess
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -113,31 +115,51 @@ def build_dtb(board: Board, ksrc: Path, initramfs: Path | None = None, out_dir: 
     """cpp + dtc on the board's Linux DTS (warnings are errors), then put the
     initramfs location into /chosen. ``out_dir``: where the DTB goes
     (default: the board's build directory; a benchmark booting an initramfs
-    of its own passes its own directory, so that the board's DTB, which
-    other boots read, keeps its /chosen). ``dts_variant``: see
+    of its own passes its own directory). ``dts_variant``: see
     :meth:`Board.dts`; the DTB is named after its source (linux.dtb,
-    linux-nopmu.dtb)."""
+    linux-nopmu.dtb).
+
+    With an initramfs, the DTB returned is named after it too
+    (``linux-<initramfs key>.dtb``): its /chosen holds that initramfs's
+    size, and two boots prepared at once (pytest-xdist workers) with
+    different firmware sets must not read each other's. ``linux.dtb`` is
+    written as well, the latest one (devicetree/validate.sh reads it).
+    Every file is written under a temporary name and renamed into place,
+    so a reader never sees half of one."""
     out = out_dir or board.build_dir
     out.mkdir(parents=True, exist_ok=True)
     dts = board.dts(dts_variant)
-    pre = out / f"{dts.stem}.dts.pp"
-    dtb = out / f"{dts.stem}.dtb"
-    _run(
-        [
-            "cpp", "-nostdinc", "-undef", "-x", "assembler-with-cpp", "-D__DTS__",
-            "-I", ksrc / "include", "-I", ksrc / f"arch/{board.arch}/boot/dts",
-            "-I", REPO / "devicetree", "-o", pre, dts,
-        ]
-    )
-    res = _run(["dtc", "-I", "dts", "-O", "dtb", "-o", dtb, pre])
-    if res.stderr.strip():
-        raise QemuError(f"dtc warnings on {dts}:\n{res.stderr}")
-    if initramfs is not None:
-        start = board.addr("load", "initramfs")
-        end = start + initramfs.stat().st_size
-        _run(["fdtput", "-t", "x", dtb, "/chosen", "linux,initrd-start", f"{start:x}"])
-        _run(["fdtput", "-t", "x", dtb, "/chosen", "linux,initrd-end", f"{end:x}"])
-    return dtb
+    tmp = f".{os.getpid()}"
+    pre = out / f"{dts.stem}.dts.pp{tmp}"
+    work = out / f"{dts.stem}.dtb{tmp}"
+    try:
+        _run(
+            [
+                "cpp", "-nostdinc", "-undef", "-x", "assembler-with-cpp", "-D__DTS__",
+                "-I", ksrc / "include", "-I", ksrc / f"arch/{board.arch}/boot/dts",
+                "-I", REPO / "devicetree", "-o", pre, dts,
+            ]
+        )
+        os.replace(pre, out / f"{dts.stem}.dts.pp")
+        res = _run(["dtc", "-I", "dts", "-O", "dtb", "-o", work, out / f"{dts.stem}.dts.pp"])
+        if res.stderr.strip():
+            raise QemuError(f"dtc warnings on {dts}:\n{res.stderr}")
+        dtb = out / f"{dts.stem}.dtb"
+        if initramfs is not None:
+            start = board.addr("load", "initramfs")
+            end = start + initramfs.stat().st_size
+            _run(["fdtput", "-t", "x", work, "/chosen", "linux,initrd-start", f"{start:x}"])
+            _run(["fdtput", "-t", "x", work, "/chosen", "linux,initrd-end", f"{end:x}"])
+            keyed = out / f"{dts.stem}-{initramfs.parent.name}.dtb"
+            shutil.copyfile(work, f"{keyed}{tmp}")
+            os.replace(f"{keyed}{tmp}", keyed)
+            os.replace(work, dtb)
+            return keyed
+        os.replace(work, dtb)
+        return dtb
+    finally:
+        for f in (pre, work):
+            f.unlink(missing_ok=True)
 
 
 # The out-of-tree modules a board can load (board.yaml linux.modules):
@@ -162,6 +184,15 @@ def build_modules(kdir: Path, folders: Sequence[str] = tuple(KERNEL_MODULES)) ->
     return out
 
 
+def _stage(src: Path, dst: Path) -> None:
+    """Copy ``src`` to ``dst`` under a temporary name, then rename: a boot
+    being prepared at the same time (another pytest-xdist worker) reads
+    the old file or the new one, never half of one."""
+    tmp = dst.with_name(f".{dst.name}.{os.getpid()}")
+    shutil.copyfile(src, tmp)
+    os.replace(tmp, dst)
+
+
 def build_test_firmware(board: Board | None = None) -> list[Path]:
     """The board's test firmware (good and bad images): board.yaml's
     ``test_firmware`` (a fixtures folder with a Makefile, and make variables
@@ -179,7 +210,7 @@ def build_test_firmware(board: Board | None = None) -> list[Path]:
     if default:
         staged = out / "default" / str(default["name"])
         staged.parent.mkdir(exist_ok=True)
-        shutil.copyfile(out / str(default["image"]), staged)
+        _stage(out / str(default["image"]), staged)
         images.append(staged)
     return images
 
@@ -214,7 +245,7 @@ def rpu_app_firmware(board: Board, build: bool = True) -> list[Path]:
             if (src_dir / src).exists():
                 staged = stage / name.replace("rpu_app", "rpu_app" + variant, 1)
                 stage.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(src_dir / src, staged)
+                _stage(src_dir / src, staged)
                 found.append(staged)
     return found
 
@@ -273,10 +304,32 @@ def prepare_images(
     board (its servo devicetree picks the platform: the A9 or the R5).
     ``dts_variant``: see :meth:`Board.dts`.
     """
-    if firmware is None:
-        firmware = build_test_firmware(board) + (rpu_app_firmware(board) if with_rpu_app else [])
-    if board.boot_flow == "tf-a":
-        return prepare_tf_a_images(board, firmware, dts_variant)
+    with _images_lock():
+        if firmware is None:
+            firmware = build_test_firmware(board) + (rpu_app_firmware(board) if with_rpu_app else [])
+        if board.boot_flow == "tf-a":
+            return prepare_tf_a_images(board, firmware, dts_variant)
+        return _prepare_stub_images(board, firmware, dts_variant)
+
+
+@contextlib.contextmanager
+def _images_lock() -> Iterator[None]:
+    """One :func:`prepare_images` at a time on this tree (an flock on
+    build/.images.lock): pytest-xdist workers, or a test and a demo, share
+    build/ and the caches; the second waits for the first's builds and then
+    finds them done."""
+    lock = REPO / "build" / ".images.lock"
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _prepare_stub_images(board: Board, firmware: Sequence[Path], dts_variant: str | None) -> Images:
+    """:func:`prepare_images` for the boot flow ``stub`` (the Zynq-7000)."""
     kdir = kernel_dir()
     modules = build_modules(kdir, board.modules)
     arch = guest_arch(board)

@@ -282,6 +282,7 @@ def build(dts: Path, bindings: list[Path], board: str):
     put("BOARD_CPU_HAS_VBAR", 1 if plat.HAS_VBAR else 0, f"platform {plat.NAME}")
     put("BOARD_GIC_OWNED", 1 if plat.GIC_OWNED else 0,
         "this core's own GIC (enabled here), not one shared with Linux")
+    put("BOARD_GIC_IDS", plat.GIC_IDS, "interrupt IDs of this core's GIC (the IRQ descriptor table)")
 
     # ---- memory ------------------------------------------------------
     carve = prop(servo, "memory-region")
@@ -402,6 +403,9 @@ def build(dts: Path, bindings: list[Path], board: str):
     put("BOARD_STATS_CYCLES", prop(servo, "stats-cycles"))
 
     # ---- memory protection: what the firmware uses, nothing else ------
+    for name, v in cfg.items():
+        if name.endswith("_IRQ") and isinstance(v, int) and not v < plat.GIC_IDS:
+            fail(servo, f"{name} = {v}: beyond the {plat.GIC_IDS} interrupt IDs of platform {plat.NAME}'s GIC")
     devices = [uart, ttc, gic, *slcr[:1], *plat_devs, *can_devs]
     mmu = plat.memory_map(cfg, carve, ocm, devices, fail)
     put("__PLATFORM__", plat.NAME)

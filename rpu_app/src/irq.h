@@ -4,6 +4,8 @@
 
 #include <stdint.h>
 
+#include "board.h"
+
 /*
  * Interrupt descriptor table: one descriptor per GIC interrupt
  * ID with a handler, a clear function (clears the flag at the source) and
@@ -28,7 +30,7 @@
  * value, other group under BPR) preempt it, so a handler never re-enters
  * itself and the depth is bounded by the number of priority groups used.
  */
-#define IRQ_MAX_ID 96u			/* Zynq-7000 GIC: IDs 0..95 */
+#define IRQ_MAX_ID BOARD_GIC_IDS	/* the GIC's IDs (per platform: board_config.h) */
 #define IRQ_LATENCY_NONE 0xffffffffu
 
 enum irq_trigger { IRQ_TRIGGER_LEVEL = 0, IRQ_TRIGGER_EDGE = 1 };

@@ -4,7 +4,9 @@ figure against its target.
 
     west bench                         # all of them (board ones boot QEMU)
     west bench transport motion        # some of them
-    west bench --list                  # names, host/board, duration, command
+    west bench -b zynqmp_qemu cycle    # a board benchmark on one board (-b repeatable;
+                                       # default: every board, host benchmarks once)
+    west bench --list                  # names, host/board, on which board, duration, command
     west bench --table                 # only the table of bench/results
     west bench --quick transport       # tiny configuration, build/bench/quick
 
@@ -38,16 +40,18 @@ try:
             super().__init__("bench", DESCRIPTION, __doc__ or "", accepts_unknown_args=True)
 
         def do_add_parser(self, parser_adder):  # type: ignore[no-untyped-def]
-            parser = parser_adder.add_parser(self.name, help=self.help, description=self.description,
-                                             formatter_class=argparse.RawDescriptionHelpFormatter,
-                                             add_help=False)
-            parser.add_argument("args", nargs=argparse.REMAINDER,
-                                help="NAME... and the options of scripts/bench.sh (--list, --table, "
-                                     "--quick, --results DIR, -v); -h for scripts/bench.sh's help")
-            return parser
+            # No arguments of its own: everything after `west bench` (NAME...,
+            # -b/--board NAME, --list, --table, --quick, --results DIR, -v,
+            # -h for scripts/bench.sh's help) reaches scripts/bench.sh as
+            # west's unknown arguments, in the order given. (A REMAINDER
+            # positional does not take a leading option: `west bench -b X
+            # cycle` came out as `X cycle -b`.)
+            return parser_adder.add_parser(self.name, help=self.help, description=self.description,
+                                           formatter_class=argparse.RawDescriptionHelpFormatter,
+                                           add_help=False)
 
         def do_run(self, args, unknown):  # type: ignore[no-untyped-def]
-            rc = run([*args.args, *unknown])
+            rc = run(list(unknown))
             if rc:
                 sys.exit(rc)
 

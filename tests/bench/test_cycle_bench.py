@@ -117,7 +117,19 @@ def test_figures_and_their_targets(cb: ModuleType) -> None:
 
 
 def test_committed_results_agree_with_their_points(cb: ModuleType) -> None:
-    doc = json.loads((TOP / "bench" / "results" / "cycle.json").read_text())
+    _agree(cb, TOP / "bench" / "results" / "cycle.json")
+
+
+def test_committed_zynqmp_results_agree_with_their_points(cb: ModuleType) -> None:
+    path = TOP / "bench" / "results" / "cycle-zynqmp_qemu.json"
+    doc = json.loads(path.read_text())
+    assert doc["board"] == "zynqmp_qemu"
+    assert doc["timebase"]["ticks_per_us"] == 1000 and doc["timebase"]["ns_per_instruction"] == 1
+    _agree(cb, path)
+
+
+def _agree(cb: ModuleType, path: Path) -> None:
+    doc = json.loads(path.read_text())
     assert bench.validate(doc) == []
     mode = doc["modes"]["virtual"]
     if "sweep" not in mode:
@@ -136,6 +148,44 @@ def test_committed_results_agree_with_their_points(cb: ModuleType) -> None:
     assert lg["servo"]["axes"] == lg["axes"] and lg["servo"]["period_us"] == lg["period_us"]
     k = f"long_{lg['rate_hz'] / 1000:g}khz_{lg['axes']}axes"
     assert figs[f"{k}_missed_linux"] == lg["linux"]["missed"] and figs[f"{k}_missed_servo"] == lg["servo"]["missed"]
+
+
+def test_time_base_and_instruction_clock_from_the_boards_data(cb: ModuleType) -> None:
+    """Ticks of the servo's time base to instructions from the servo
+    devicetree (BOARD_TIMEBASE_TICKS_PER_US, as rpu_app's generator
+    derives it) and board.yaml's -icount shift: the A9's global timer at
+    100 MHz (a tick is 10 instructions), the R5's PMCCNTR at the 1 GHz
+    QEMU counts (a tick is one)."""
+    from servoamp import qemu
+    a9 = cb.TimeBase.of(qemu.Board.load("zynq7000_qemu"))
+    r5 = cb.TimeBase.of(qemu.Board.load("zynqmp_qemu"))
+    assert (a9.ticks_per_us, a9.ns_per_instruction) == (100, 1)
+    assert (r5.ticks_per_us, r5.ns_per_instruction) == (1000, 1)
+    assert a9.instructions(53) == 530 and r5.instructions(530) == 530
+    assert a9.us(250) == 2.5 and r5.us(2500) == 2.5
+    assert cb.TimeBase(1000, 2).instructions(530) == 265   # shift=1: 2 ns an instruction
+
+
+def _window(ticks_per_us: int, rx: int) -> dict[str, Any]:
+    cost = {p: {"mean": rx, "max": 2 * rx} for p in ("rx", "ctrl", "tx", "cycle")}
+    return {"guest_seconds": 1,
+            "linux": {"cycles": 1000, "missed": 0, "wake_latency_ns_since_start": {"min": 1, "mean": 2, "max": 3}},
+            "servo": {"cycles": 1000, "missed": 0, "axes": 4, "irq_entry_latency_ns_max_since_start": 1000,
+                      "ticks_per_us": ticks_per_us, "cost_ticks_since_start": cost}}
+
+
+def test_window_figures_convert_each_boards_ticks(cb: ModuleType) -> None:
+    a9 = {f["name"]: f["value"] for f in cb.figures({"modes": {"virtual": {"1000us": _window(100, 53)}}})}
+    r5 = {f["name"]: f["value"] for f in cb.figures({"modes": {"virtual": {"1000us": _window(1000, 530)}},
+                                                    "timebase": {"ns_per_instruction": 1}})}
+    for figs in (a9, r5):
+        assert figs["virtual_1000us_servo_rx_instructions"] == 530
+        assert figs["virtual_1000us_servo_handler_max"] == 1.06    # us: 1060 ns
+    # results from before --board: A9 ticks of 10 ns under their old key
+    old = _window(100, 53)
+    old["servo"]["cost_ticks_10ns_since_start"] = old["servo"].pop("cost_ticks_since_start")
+    del old["servo"]["ticks_per_us"]
+    assert {f["name"]: f["value"] for f in cb.figures({"modes": {"virtual": {"1000us": old}}})} == a9
 
 
 def test_cycle_bench_is_mypy_strict() -> None:

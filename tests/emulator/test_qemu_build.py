@@ -59,6 +59,18 @@ def test_zynqmp_rpu_qtest_passes_on_our_build() -> None:
     assert not re.search(r"^not ok", out, re.M), out
 
 
+def test_zcu102_pl_timer_qtest_passes_on_our_build() -> None:
+    """Patch 0027: the timer in the ZCU102's PL (0x80000000), each counter's
+    interrupt pending on its own PL-to-PS line (GIC 121, 122) at both the
+    APU's and the RPU's distributor, gone from both when acknowledged."""
+    res = subprocess.run([str(REPO / "emulator/qemu/run-regression-test.sh"), str(qemu.project_qemu()),
+                          "--test", "xlnx-zcu102-pl-timer-test"], text=True, capture_output=True, timeout=300)
+    out = res.stdout + res.stderr
+    assert res.returncode == 0, out
+    assert re.search(r"^ok \d+ .*/xlnx-zcu102-pl-timer/both-gics$", out, re.M), out
+    assert not re.search(r"^not ok", out, re.M), out
+
+
 @pytest.mark.parametrize("patch", PATCHES, ids=[p.name[:4] for p in PATCHES])
 def test_patch_is_in_format_patch_form(patch: Path) -> None:
     text = patch.read_text()

@@ -30,6 +30,7 @@ from rpu_common import BOARD, REPO, _make
 from servoamp import canload
 
 CAN_DTS = REPO / "boards" / BOARD / "servo-can.dts"
+pytestmark = pytest.mark.on_board(BOARD)    # the firmware alone in QEMU
 
 
 

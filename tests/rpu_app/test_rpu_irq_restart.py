@@ -34,7 +34,8 @@ from rpu_common import CRSH, PRKD, RUN, qemu_ok
 from qemu_rpu import GdbRemote, QemuRpu, _symbol as symbol
 from test_rpu_qemu import STATS_RE, entry_of, request_start, request_stop
 
-pytestmark = pytest.mark.skipif(qemu_ok() is not None, reason=qemu_ok() or "")
+pytestmark = [pytest.mark.skipif(qemu_ok() is not None, reason=qemu_ok() or ""),
+              pytest.mark.on_board("zynq7000_qemu")]
 
 BUSY = "CPU interface busy"
 

@@ -19,7 +19,8 @@ from rpu_common import PRKD, RUN, qemu_ok
 from qemu_rpu import QemuRpu, _symbol as symbol
 from test_rpu_qemu import STATS_RE, entry_of, park_range, request_start, request_stop
 
-pytestmark = pytest.mark.skipif(qemu_ok() is not None, reason=qemu_ok() or "")
+pytestmark = [pytest.mark.skipif(qemu_ok() is not None, reason=qemu_ok() or ""),
+              pytest.mark.on_board("zynq7000_qemu")]
 
 # struct link_debug (rpu_app/src/link.h): word offsets
 DBG_OVERLOAD, DBG_STRAY = 4, 8

@@ -17,7 +17,8 @@ from elftools.elf.elffile import ELFFile
 from rpu_common import CRSH, PRKD, RUN, STOP, _make, qemu_ok
 from qemu_rpu import QemuRpu
 
-pytestmark = pytest.mark.skipif(qemu_ok() is not None, reason=qemu_ok() or "")
+pytestmark = [pytest.mark.skipif(qemu_ok() is not None, reason=qemu_ok() or ""),
+              pytest.mark.on_board("zynq7000_qemu")]
 
 STATS_RE = (r"^stats cycle=(\d+) guest_us=(\d+) period_min_ns=(\d+) period_max_ns=(\d+) overruns=(\d+) "
             r"missed=(\d+) nest_max=(\d+) nest_test_ok=(\d+) nest_test_fail=(\d+) "

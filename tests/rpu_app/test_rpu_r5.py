@@ -21,6 +21,7 @@ from rpu_common import REPO, parse_board_config
 from servoamp import qemu
 
 BOARD = "zynqmp_qemu"
+pytestmark = pytest.mark.on_board(BOARD)
 DTS = REPO / "boards" / BOARD / "servo.dts"
 GEN = REPO / "rpu_app" / "scripts" / "gen_board_header.py"
 
@@ -63,13 +64,20 @@ def test_generator_picks_the_r5_platform_and_agrees_with_board_yaml(tmp_path: Pa
     assert cfg["BOARD_UART_BASE"] == [u["base"] for u in board.qemu["uarts"] if u["owner"] == "servo"][0]
     assert (cfg["BOARD_CPU_HAS_VBAR"], cfg["BOARD_GIC_OWNED"], cfg["BOARD_HAS_STOP_CONTRACT"]) == (0, 1, 0)
     assert cfg["BOARD_VECTORS_BASE"] == 0
-    assert cfg["BOARD_CYCLE_IRQ"] == 68          # TTC0 counter 0: SPI 36
+    # the cycle: the PL's timer, counter 0 on IRQ0[0] (SPI 89), counter 1
+    # (Linux's) on IRQ0[1]; mapped as a device, execute-never
+    pl = board.data["pl_timer"]
+    assert cfg["BOARD_TTC_BASE"] == pl["base"]
+    assert (cfg["BOARD_CYCLE_COUNTER"], cfg["BOARD_LINUX_CYCLE_COUNTER"]) == (0, 1)
+    assert (cfg["BOARD_CYCLE_IRQ"], cfg["BOARD_LINUX_CYCLE_IRQ"]) == (32 + pl["spi"], 32 + pl["spi"] + 1)
     header = (tmp_path / "board_config.h").read_text()
     regions = re.findall(r"X\((0x[0-9a-f]+)u, (0x[0-9a-f]+)u, (MPU_\w+)\)", header)
     assert 1 + len(regions) <= 16                # and the stack guard
     for base, size, _ in regions:
         b, s = int(base, 16), int(size, 16)
         assert s & (s - 1) == 0 and b % s == 0, (base, size)
+    assert ("0x80000000", "0x00001000", "MPU_DEVICE") in [
+        (b, f"0x{int(s, 16):08x}", a) for b, s, a in regions], regions
 
 
 @pytest.mark.parametrize("edit,why", [
@@ -77,6 +85,7 @@ def test_generator_picks_the_r5_platform_and_agrees_with_board_yaml(tmp_path: Pa
     (("reg = <0x00000000 0x10000>;", "reg = <0x00010000 0x10000>;"), "vectors must be at 0x0"),
     (("stats-cycles = <1000>;", "stats-cycles = <1000>;\n\t\tidle-wake-us = <10000>;"), "has none"),
     (("compatible = \"arm,cortex-r5f\";", "compatible = \"arm,cortex-m4\";"), "no platform"),
+    (("interrupts = <0 89 4>, <0 90 4>", "interrupts = <0 170 4>, <0 90 4>"), "beyond the 192 interrupt IDs"),
 ])
 def test_generator_refuses_what_an_r5_cannot_have(tmp_path: Path, edit: tuple[str, str], why: str) -> None:
     text = DTS.read_text()

@@ -97,6 +97,12 @@ def test_linux_dt_matches_board_yaml(board: qemu.Board, images: qemu.Images, var
     assert fdtget(dtb, mbox, "servoamp,remoteproc") == fdtget(dtb, "/remoteproc@ffe00000/r5f@0", "phandle")
     ocm = board.addr("ocm", "base")
     assert ocm <= board.addr("servo", "mailbox", "base") < ocm + board.addr("ocm", "size")
+    # Linux's cycle: counter 1 of the PL's timer, its clear-on-read
+    # interrupt register (+0x58), on the PL-to-PS line IRQ0[1]
+    pl = board.data["pl_timer"]
+    cyc = f"/axi/cycle-interrupt@{pl['base'] + 0x58:x}"
+    assert cells(fdtget(dtb, cyc, "reg")) == [pl["base"] + 0x58, 4]
+    assert fdtget(dtb, cyc, "interrupts") == [0, pl["spi"] + 1, 4]
     assert cells(fdtget(dtb, "/axi/interrupt-controller@f9010000", "reg"))[0:3:2] == [
         board.addr("gic", "dist"), board.addr("gic", "cpu")]
     u0 = board.qemu["uarts"][0]

@@ -12,6 +12,7 @@ CPU_COMPATIBLE = "arm,cortex-a9"
 NAME = "zynq7000_a9"
 HAS_VBAR = True
 GIC_OWNED = False        # the distributor is Linux's: never enabled here
+GIC_IDS = 96             # the A9 GIC's interrupt IDs: 0..95
 STOP_CONTRACT = True     # STOP / RUN! / PRKD words, park loop, boot register
 SLCR = True              # the UART clock gate is checked in the SLCR
 SECTION = 1 << 20        # MMU section (1 MiB)

@@ -13,6 +13,7 @@ CPU_COMPATIBLE = "arm,cortex-r5f"
 NAME = "zynqmp_r5"
 HAS_VBAR = False         # the vectors are at 0x0 (the ATCM): `vectors`
 GIC_OWNED = True         # the RPU's GIC: this firmware enables it
+GIC_IDS = 192            # the RPU GIC's IDs: 32 + 160 SPIs (PL-to-PS lines: 121-128, 136-143)
 STOP_CONTRACT = False    # the upstream driver powers the core down
 SLCR = False
 MPU_REGIONS = 16         # the R5's PMSAv7 data regions

@@ -4,8 +4,8 @@ Documentation     rpu_app, the servo firmware, on R5 0 of the ZynqMP (platform
 ...               the RPU's own GIC, the core's cycle counter as time base),
 ...               started and stopped by Linux's upstream xlnx_r5_remoteproc:
 ...               its banner and statistics on UART1 and in trace0, the cycle
-...               from TTC0 through the RPU GIC at 1 kHz without a miss, the
-...               nesting and VFP self-tests. servod is not on this board yet
+...               from the PL's timer through the RPU GIC at 1 kHz without a
+...               miss, the nesting and VFP self-tests. servod is not on this board yet
 ...               (issue 35): the link waits for its peer. One QEMU boot.
 Resource          ../resources/zynqmp.resource
 Suite Setup       Boot Board To Shell
@@ -22,6 +22,11 @@ rpu_app Starts On R5 0
     Should Contain    ${banner}    board=zynqmp_qemu
     ${cpu}=    Wait For Line On Uart    no VBAR: vectors at 0x0    testerId=${SERVO_UART}
     Should Contain    ${cpu}    mpu=on (PMSAv7
+    # the cycle: counter 0 of the PL's timer (0x80000000), on the PL-to-PS
+    # line IRQ0[0] (SPI 89, GIC 121) taken at the RPU's GIC
+    ${cyc}=    Wait For Line On Uart    cycle: irq    testerId=${SERVO_UART}
+    Should Contain    ${cyc}    cycle: irq 121 (level)
+    Should Contain    ${cyc}    ttc 80000000 counter 0
     Wait For Line On Uart    running: no stop word    testerId=${SERVO_UART}
 
 The Cycle Runs At 1 kHz Without A Miss

@@ -2,8 +2,9 @@
 Documentation     The cycle end to end on the ZynqMP, in one boot: rpu_app on
 ...               R5 0 (started by Linux's upstream xlnx_r5_remoteproc) and
 ...               servod on the A53 (PREEMPT_RT), paced by the two counters
-...               of TTC0 (the servo's through the RPU's GIC, Linux's through
-...               the APU's GIC and the cycle UIO driver), exchanging through
+...               of the PL's cycle timer on two PL-to-PS lines (the servo's
+...               through the RPU's GIC, Linux's through the APU's GIC and
+...               the cycle UIO driver), exchanging through
 ...               amp_lib's region in OCM. servod finds its remoteproc
 ...               through the mailbox's devicetree node. The exchange at
 ...               1 kHz with no cycle missed on either side (virtual time),
@@ -34,6 +35,25 @@ Status
     RETURN    ${d}
 
 *** Test Cases ***
+Both Cycles Come From The PL's Timer
+    [Documentation]    Linux's cycle is counter 1 of the timer in the PL
+    ...    (QEMU's, at 0x80000000 behind M_AXI_HPM0_LPD): its interrupt
+    ...    register is what the cycle UIO device maps, its interrupt the
+    ...    PL-to-PS line IRQ0[1] (GIC 122) at the APU's GIC, counting. The
+    ...    servo's is counter 0 on IRQ0[0] (GIC 121) at the RPU's GIC.
+    ${map}=    Execute Shell Command    for d in /sys/class/uio/uio*; do [ "$(cat $d/name)" = cycle-interrupt ] && echo "$(cat $d/maps/map0/addr) $(cat $d/maps/map0/offset)"; done; true
+    Should Be Equal    ${map}    0x0000000080000000 0x58
+    ${a}=    Execute Shell Command    grep cycle-interrupt /proc/interrupts
+    Should Match Regexp    ${a}    \\s122\\s+Level\\s+cycle-interrupt
+    Execute Shell Command    sleep 0.2
+    ${b}=    Execute Shell Command    grep cycle-interrupt /proc/interrupts
+    ${na}=    Evaluate    sum(int(w) for w in $a.split()[1:-4])
+    ${nb}=    Evaluate    sum(int(w) for w in $b.split()[1:-4])
+    Should Be True    ${nb} - ${na} >= 150    ${na} -> ${nb} interrupts in 0.2 s
+    ${fw}=    Execute Shell Command    grep -m1 'cycle: irq' ${TRACE0}
+    Should Contain    ${fw}    cycle: irq 121 (level)
+    Should Contain    ${fw}    ttc 80000000 counter 0
+
 servod Finds R5 0 Through The Mailbox's Devicetree Node
     [Documentation]    No board name in servod: the OCM mailbox's node
     ...    names the remoteproc (servoamp,remoteproc), the upstream
