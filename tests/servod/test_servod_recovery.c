@@ -14,7 +14,9 @@
  *     watchdog and what servod does with its verdict: telemetry_cycle(),
  *     wrapped by the linker, --wrap, attaches it there);
  *   - remoteproc in sysfs played by the test between two passes of the main
- *     loop: a directory with state, recovery and device/report_crash, the
+ *     loop: a directory with state, recovery and device/report_crash (or,
+ *     as the upstream xlnx_r5_remoteproc, no report_crash and recovery
+ *     disabled by the driver), the
  *     kernel's rules applied to what servod wrote (report_crash with
  *     recovery enabled stops and starts the firmware, and a start that fails
  *     there leaves it offline with its power reference held: a later
@@ -82,6 +84,9 @@ struct rig {
 };
 
 static struct rig g;
+/* the next rig_up plays a driver without device/report_crash whose own
+ * recovery is disabled at probe (the upstream xlnx_r5_remoteproc) */
+static int rig_upstream;
 
 static void wfile(const char *dir, const char *name, const char *text)
 {
@@ -390,8 +395,9 @@ static void rig_up(uint32_t limit, uint32_t backoff_ms, int telemetry)
 	}
 	snprintf(g.kstate, sizeof(g.kstate), "offline");
 	wfile(g.dir, "state", "offline");
-	wfile(g.dir, "recovery", "enabled");
-	wfile(g.dir, "device/report_crash", "");
+	wfile(g.dir, "recovery", rig_upstream ? "disabled" : "enabled");
+	if (!rig_upstream)
+		wfile(g.dir, "device/report_crash", "");
 
 	sd->quit = &quit;
 	sd->opt.amplitude = 2000.0;
@@ -1026,6 +1032,131 @@ static void test_operator_stop_during_recovery(void)
 	rig_down();
 }
 
+/* ---- (6) a driver without report_crash (the ZynqMP's upstream R5 driver) --------- */
+
+/* servod's log (its stderr) from here into a file, until log_end(). */
+static int log_fd_saved = -1;
+static char log_path[64];
+
+static void log_begin(void)
+{
+	int fd;
+
+	snprintf(log_path, sizeof(log_path), "/tmp/servod-rlog.XXXXXX");
+	fd = mkstemp(log_path);
+	CHECK(fd >= 0);
+	fflush(stderr);
+	log_fd_saved = dup(2);
+	dup2(fd, 2);
+	close(fd);
+}
+
+/* The log captured since log_begin() (also echoed to stdout), in buf. */
+static void log_end(char *buf, size_t n)
+{
+	FILE *f;
+	size_t got = 0;
+
+	fflush(stderr);
+	dup2(log_fd_saved, 2);
+	close(log_fd_saved);
+	f = fopen(log_path, "r");
+	if (f) {
+		got = fread(buf, 1, n - 1, f);
+		fclose(f);
+	}
+	buf[got] = 0;
+	unlink(log_path);
+	fputs(buf, stdout);
+}
+
+static unsigned count_of(const char *hay, const char *needle)
+{
+	unsigned c = 0;
+
+	for (const char *p = strstr(hay, needle); p; p = strstr(p + 1, needle))
+		c++;
+	return c;
+}
+
+static void test_driver_without_report_crash(void)
+{
+	static char log[65536];
+	char msg[512], body[4096], rec[32], p[160];
+	uint64_t restores;
+	uint32_t kp;
+
+	printf("servod recovery: a driver without report_crash (the upstream R5 driver)\n");
+	log_begin();
+	rig_upstream = 1;
+	rig_up(3, 50, 0);
+	rig_upstream = 0;
+	CHECK_EQ(g.sd->rproc.report_crash, 0);
+	/* a parameter set by the operator before the hang */
+	CHECK_EQ(req("param set pos_kp 61.5", msg, sizeof(msg), body, sizeof(body)), SE_OK);
+	kp = sp_word_from_f32(61.5f);
+	CHECK_EQ(g.val[SP_P_pos_kp], kp);
+	/* the firmware hangs: stopped and started through state, the restarted
+	 * firmware (its defaults: nothing of the old one's values) gets the set */
+	restores = stat_of(&g.sd->stats.restores);
+	fw_hang();
+	pthread_mutex_lock(&g.fw);
+	g.val[SP_P_pos_kp] = 0;
+	pthread_mutex_unlock(&g.fw);
+	RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1, 10);
+	CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
+	CHECK_EQ(stat_of(&g.sd->stats.recoveries), 1);
+	CHECK_EQ(g.starts, 2);
+	CHECK_EQ(g.stops, 1);
+	CHECK_EQ(g.reports, 0);
+	CHECK(!strcmp(g.kstate, "running"));
+	CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+	pthread_mutex_lock(&g.fw);
+	CHECK_EQ(g.val[SP_P_pos_kp], kp);
+	pthread_mutex_unlock(&g.fw);
+	/* servod wrote no report_crash (none made) and left recovery as the
+	 * driver set it */
+	snprintf(p, sizeof(p), "%s/device/report_crash", g.dir);
+	CHECK(access(p, F_OK) != 0);
+	rfile(g.dir, "recovery", rec, sizeof(rec));
+	CHECK(!strcmp(rec, "disabled"));
+	/* fails after every attach: the window's limit (3, one used) latches */
+	pthread_mutex_lock(&g.fw);
+	g.hang_after_attach = 1;
+	pthread_mutex_unlock(&g.fw);
+	RUN_UNTIL(latched() || g.starts >= 8, 30);
+	CHECK(latched());
+	CHECK_EQ(stat_of(&g.sd->stats.recoveries), 3);
+	CHECK_EQ(g.starts, 1 + 3);
+	CHECK(!strcmp(g.kstate, "offline"));
+	CHECK_EQ(g.power, 0);
+	CHECK_EQ(req("status", msg, sizeof(msg), body, sizeof(body)), SE_OFFLINE);
+	CHECK(body_has(body, "latched_why=servo stalled (heartbeat still for 20 cycles); 3 restarts within 60 s"));
+	/* the operator's reset: back, with the parameter set */
+	pthread_mutex_lock(&g.fw);
+	g.hang_after_attach = 0;
+	g.val[SP_P_pos_kp] = 0;
+	pthread_mutex_unlock(&g.fw);
+	restores = stat_of(&g.sd->stats.restores);
+	CHECK_EQ(req("fault reset", msg, sizeof(msg), body, sizeof(body)), SE_OK);
+	RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1, 10);
+	CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
+	CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+	pthread_mutex_lock(&g.fw);
+	CHECK_EQ(g.val[SP_P_pos_kp], kp);
+	pthread_mutex_unlock(&g.fw);
+	CHECK_EQ(g.reports, 0);
+	rig_down();
+	log_end(log, sizeof(log));
+	/* said once what it does instead; no error at each of the 3 stalls */
+	CHECK_EQ(count_of(log, "no device/report_crash"), 1);
+	CHECK_EQ(count_of(log, "remoteproc's own recovery is disabled"), 1);
+	CHECK_EQ(count_of(log, "restarting the firmware (servod's record"), 3);
+	CHECK_EQ(count_of(log, "reporting a crash"), 0);
+	CHECK_EQ(count_of(log, "No such file"), 0);
+	CHECK_EQ(count_of(log, "all the same"), 0);
+}
+
 int main(void)
 {
 	setvbuf(stdout, 0, _IOLBF, 0);
@@ -1038,5 +1169,6 @@ int main(void)
 	test_operator_stop_is_final();
 	test_operator_stop_during_recovery();
 	test_stop_and_start_between_passes();
+	test_driver_without_report_crash();
 	return check_summary("servod recovery");
 }
