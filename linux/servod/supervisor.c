@@ -3,12 +3,14 @@
  * supervisor.c - the supervisor (main thread, every pass of the main loop):
  * follows remoteproc's view of the servo through the session state machine
  * (session.h), initialises the region only while the servo is offline,
- * reports a stall the cycle thread saw to remoteproc (report_crash) and
- * restarts the firmware itself through remoteproc's state (stop, start),
- * within the bounds of recovery.h: a failed restart is retried with
- * backoff, one restart too many within the window latches a fault (the
- * firmware left stopped) until the operator's "fault reset". It loads the
- * parameter set into the servo after every attach.
+ * reports a stall the cycle thread saw to remoteproc (report_crash, where
+ * the driver has it; the upstream R5 driver has not: the stall is then
+ * servod's own record) and restarts the firmware itself through
+ * remoteproc's state (stop, start), within the bounds of recovery.h: a
+ * failed restart is retried with backoff, one restart too many within the
+ * window latches a fault (fault.c: the firmware left stopped) until the
+ * operator's "fault reset". It loads the parameter set into the servo
+ * after every attach.
  */
 #define _GNU_SOURCE
 #include <errno.h>
