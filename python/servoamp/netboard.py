@@ -39,14 +39,56 @@ from typing import IO, Any, Callable, Mapping, Sequence
 from servoamp import qemu
 from servoamp import telemetry as tw
 
-# The board's network entry (boards/zynq7000_qemu/board.yaml) holds the
-# same values; tests/robot/test_board_contract.py checks that they agree.
+# The defaults of a board's network entry (board.yaml ``network:``; a
+# ControllerBoard takes its board's values); tests/robot/test_board_contract.py
+# checks that they agree with the Zynq-7000's.
 TELEMETRY_PORT = 7700
 GUEST_ADDR = "10.0.2.15/24"
 NIC_MODEL = "cadence_gem"
 SERVOD_LOG = "/tmp/servod.log"
 TOKEN_FILE = "/tmp/telemetry.token"
+# the Zynq-7000's servo core (its only remoteproc); a ControllerBoard finds
+# its board's as servod does (:data:`FIND_RPROC`, ``cb.rproc``)
 RPROC = "/sys/class/remoteproc/remoteproc0"
+
+# Guest shell: the remoteproc instance of the servo core, found as servod
+# finds it (linux/servod/rproc.c): the OCM mailbox's UIO device's
+# devicetree node names it (servoamp,remoteproc, a phandle), and the
+# remoteproc whose device's node has that phandle is it. Prints
+# ``RPROC=/sys/class/remoteproc/remoteprocN``.
+FIND_RPROC = (
+    "ph=$(for f in /sys/class/uio/uio*/device/of_node/servoamp,remoteproc; do "
+    "[ -e \"$f\" ] && od -An -tx1 \"$f\"; done | tr -d ' \\n'); "
+    "for r in /sys/class/remoteproc/remoteproc*; do "
+    "[ -n \"$ph\" ] && [ \"$(od -An -tx1 $r/device/of_node/phandle 2>/dev/null | tr -d ' \\n')\" = \"$ph\" ] "
+    "&& echo RPROC=$r; done")
+
+
+def find_rproc(sh: Callable[[str], str]) -> str:
+    """The servo core's remoteproc directory in the guest (:data:`FIND_RPROC`
+    through ``sh``, a guest shell), or QemuError when no mailbox node names
+    one."""
+    import re
+
+    found = re.findall(r"^RPROC=(/sys/class/remoteproc/remoteproc\d+)\s*$", sh(FIND_RPROC), re.M)
+    if len(found) != 1:
+        raise qemu.QemuError(f"the mailbox's servoamp,remoteproc names {len(found)} remoteproc instances: {found}")
+    return found[0]
+
+
+def stop_contract(board: qemu.Board) -> bool:
+    """Whether the board's servo firmware has the cooperative stop (STOP,
+    the STOPPING state word, PRKD and the park loop: rpu_app's platform,
+    BOARD_HAS_STOP_CONTRACT in the board_config.h its build generated;
+    rpu_app/README.md). The ZynqMP's R5 has not: the upstream driver powers
+    the core down without asking it."""
+    import re
+
+    h = qemu.REPO / "build" / "rpu_app" / board.name / "board_config.h"
+    m = re.search(r"^#define BOARD_HAS_STOP_CONTRACT\s+(?:BOARD_U\()?(\d+)", h.read_text(), re.M)
+    if m is None:
+        raise qemu.QemuError(f"{h}: no BOARD_HAS_STOP_CONTRACT (rpu_app not built for {board.name}?)")
+    return m.group(1) != "0"
 
 
 def free_port() -> int:
@@ -112,6 +154,11 @@ class ControllerBoard:
         self.machine: qemu.QemuMachine | None = None
         self.boot_times: qemu.BootTimes | None = None
         self.prompt = str(self.board.data["linux"]["prompt"])
+        net = dict(self.board.data.get("network") or {})
+        self.guest_addr = str(net.get("guest_addr", GUEST_ADDR))
+        self.nic_model = str(net.get("nic", NIC_MODEL))
+        self.telemetry_port = int(net.get("telemetry_port", TELEMETRY_PORT))
+        self.rproc = ""                 # the servo core's remoteproc (found after the boot)
         self.token = secrets.token_hex(16)  # servod's --telemetry-token, per boot
         # CAN (docs/canlink.md, docs/fieldbus.md): bus (0: CAN0, 1: CAN1) ->
         # the drive simulator's --nodes on it; each bus linked in lockstep to
@@ -140,7 +187,9 @@ class ControllerBoard:
             self.can_socks = {b: self._can_dir / f"can{b}.sock" for b in sorted(self.can_drives)}
         self.machine = qemu.QemuMachine(self.board, self.images, accel=self.accel,
                                         keep_logs=self.keep_logs, clock=self.clock,
-                                        icount=self.icount, extra_args=nic_args(self.host_port) + self.extra_args,
+                                        icount=self.icount,
+                                        extra_args=nic_args(self.host_port, self.telemetry_port,
+                                                            self.nic_model) + self.extra_args,
                                         can_links=self.can_socks or None,
                                         can_link_opts=self.can_link_opts or None)
         self.machine.start()
@@ -164,7 +213,8 @@ class ControllerBoard:
                                                   str(self.can_log_path(b)), "--bus-kwargs",
                                                   "listen_only=true"])
             self.boot_times = qemu.boot_to_shell(self.machine, timeout=timeout)
-            bring_up(self.machine.uart(0), self.prompt, GUEST_ADDR, timeout=20)
+            bring_up(self.machine.uart(0), self.prompt, self.guest_addr, timeout=20)
+            self.rproc = find_rproc(lambda c: self.sh(c, expected_rc=None))
         except BaseException:
             self.machine.mark_failed()
             self.stop()
@@ -294,12 +344,23 @@ class ControllerBoard:
                 return st
             self.sh("sleep 0.5", timeout=120)
 
+    def has_report_crash(self) -> bool:
+        """Whether the servo core's remoteproc driver has servoamp's
+        ``device/report_crash`` (docs/ABI/sysfs-servoamp-remoteproc): the
+        Zynq-7000's driver; the ZynqMP's upstream driver has not, and a
+        stall is servod's own record there."""
+        return self.sh_rc(f"[ -e {self.rproc}/device/report_crash ]")[0] == 0
+
+    def kernel_rt(self) -> bool:
+        """Whether the guest's kernel is PREEMPT_RT (``uname -v``)."""
+        return "PREEMPT_RT" in self.sh("uname -v")
+
     # -- the controller ------------------------------------------------------------------
     def telemetry_args(self) -> str:
         """servod's options for telemetry through the forward: the guest's
         address and the token (written into the guest, mode 0600)."""
         self.sh(f"umask 077; echo {self.token} > {TOKEN_FILE}")
-        return f"--telemetry {GUEST_ADDR.split('/')[0]}:{TELEMETRY_PORT} --telemetry-token {TOKEN_FILE}"
+        return f"--telemetry {self.guest_addr.split('/')[0]}:{self.telemetry_port} --telemetry-token {TOKEN_FILE}"
 
     def servod_board_args(self) -> str:
         """servod's options that name the board: its controller id (the
@@ -322,7 +383,7 @@ class ControllerBoard:
         self.wait_servod_log("waiting for the servo")
 
     def start_firmware(self, firmware: str = "rpu_app.elf") -> None:
-        self.sh(f"echo {firmware} > {RPROC}/firmware && echo start > {RPROC}/state")
+        self.sh(f"echo {firmware} > {self.rproc}/firmware && echo start > {self.rproc}/state")
         self.wait_servod_log("parameter set loaded")
 
     def wait_telemetry(self, timeout: float = 20.0) -> tw.Hello:
