@@ -29,6 +29,9 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "python"))
+# tests/board_params.py (the boards a board suite is parametrized by), for
+# the test modules of every folder
+sys.path.insert(1, str(REPO / "tests"))
 
 FIRST_BOARD = "zynq7000_qemu"
 # folders whose tests all belong to one board
