@@ -94,9 +94,6 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     mcap = out / "run.mcap"
     board = qemu.Board.load(args.board)
-    if not args.no_fault and not board.data.get("demo", {}).get("hang", True):
-        _say(f"{board.name}: no firmware hang on record (board.yaml demo.hang: its recovery is not there yet)")
-        args.no_fault = True
     images = qemu.prepare_images(board)
     _say(f"images ready ({time.monotonic() - t0:.1f} s)")
     cb = netboard.ControllerBoard(board, images, host_port=args.port or None,
@@ -106,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     asc: dict[int, Path] = {}
     with cb:
         _say(f"{board.name}: booted with gem0 on QEMU user networking: 127.0.0.1:{cb.host_port} -> "
-             f"guest {netboard.GUEST_ADDR.split('/')[0]}:{netboard.TELEMETRY_PORT} "
+             f"guest {cb.guest_addr.split('/')[0]}:{cb.telemetry_port} "
              f"({time.monotonic() - t0:.1f} s)")
         cb.start_servod()
         cb.start_firmware("rpu_app-can.elf" if args.can else "rpu_app.elf")

@@ -26,6 +26,7 @@ fresh random token (``cb.token``) that it writes into the guest first.
 
 from __future__ import annotations
 
+import re
 import secrets
 import shutil
 import socket
@@ -68,9 +69,7 @@ def find_rproc(sh: Callable[[str], str]) -> str:
     """The servo core's remoteproc directory in the guest (:data:`FIND_RPROC`
     through ``sh``, a guest shell), or QemuError when no mailbox node names
     one."""
-    import re
-
-    found = re.findall(r"^RPROC=(/sys/class/remoteproc/remoteproc\d+)\s*$", sh(FIND_RPROC), re.M)
+    found: list[str] = re.findall(r"^RPROC=(/sys/class/remoteproc/remoteproc\d+)\s*$", sh(FIND_RPROC), re.M)
     if len(found) != 1:
         raise qemu.QemuError(f"the mailbox's servoamp,remoteproc names {len(found)} remoteproc instances: {found}")
     return found[0]

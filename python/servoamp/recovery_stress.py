@@ -18,7 +18,10 @@ Options make the guest busy (a CPU hog in the guest's shell, beside servod)
 and the host busy (one spinning process per host core), the conditions of
 issue 20's failing demo run.
 
-    python -m servoamp.recovery_stress [--rounds N] [--guest-load] [--host-load] [--seed S] [--json FILE]
+    python -m servoamp.recovery_stress [--board NAME] [--rounds N] [--guest-load] [--host-load] [--seed S] [--json FILE]
+
+Any board (boards/NAME, default zynq7000_qemu): the servo core's
+remoteproc is found as servod finds it (:data:`servoamp.netboard.FIND_RPROC`).
 
 tests/robot/test_recovery_stress.py runs a short stress in the test suite;
 docs/reliability.md has the rates of long runs.
@@ -36,23 +39,23 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from servoamp import qemu
+from servoamp import netboard, qemu
 
 SERVOD_LOG = "/tmp/servod.log"
-RPROC = "/sys/class/remoteproc/remoteproc0"
 ROUND_GUEST_S = 5.0            # guest seconds a round may take to recover
 CONSOLE_TIMEOUT_S = 90.0       # host seconds without an answer = a hang
 
 # commands typed while a recovery runs: short, some reading the remoteproc
-# sysfs and servod, some only printing
+# sysfs (the guest's $R: the servo core's remoteproc, set at the start)
+# and servod, some only printing
 TYPED = (
     "true",
     "echo x",
-    f"cat {RPROC}/state",
+    "cat $R/state",
     "ampctl status >/dev/null 2>&1",
     "sleep 0.01",
     "dmesg | tail -n 1 >/dev/null",
-    f"cat {RPROC}/state {RPROC}/recovery",
+    "cat $R/state $R/recovery",
 )
 
 
@@ -99,6 +102,7 @@ class Board:
                  console_timeout: float = CONSOLE_TIMEOUT_S) -> None:
         self.m = qemu.QemuMachine(board, images, accel="tcg,thread=single", keep_logs=keep_logs)
         self.prompt = str(board.data["linux"]["prompt"])
+        self.rproc = ""                 # found after the boot
         self.guest_load = guest_load
         self.console_timeout = console_timeout
 
@@ -117,7 +121,9 @@ class Board:
         # minute on purpose, which would latch servod's fault (docs/cycle.md)
         self.sh(f"(servod --recovery-limit 0 > {SERVOD_LOG} 2>&1 &)")
         self.sh(f"while ! grep -q 'waiting for the servo' {SERVOD_LOG}; do sleep 0.05; done")
-        self.sh(f"echo rpu_app.elf > {RPROC}/firmware; echo start > {RPROC}/state")
+        self.rproc = netboard.find_rproc(lambda c: self.sh(c)[1])
+        self.sh(f"R={self.rproc}")
+        self.sh(f"echo rpu_app.elf > {self.rproc}/firmware; echo start > {self.rproc}/state")
         self.sh(f"while ! grep -q 'parameter set loaded' {SERVOD_LOG}; do sleep 0.05; done")
         if self.guest_load:
             # a CPU hog beside servod, at normal priority, for the whole boot
@@ -133,7 +139,7 @@ class Board:
         if mode == "hang":
             self.sh("ampctl debug hang > /dev/null 2>&1")
         else:
-            self.sh(f"echo stop > {RPROC}/state; echo start > {RPROC}/state")
+            self.sh(f"echo stop > {self.rproc}/state; echo start > {self.rproc}/state")
         # console input at a varied moment of the detection and recovery
         time.sleep(rng.uniform(0.0, 0.4))
         for _ in range(rng.randint(1, 3)):
@@ -171,9 +177,10 @@ class Board:
 
 
 def run(rounds: int, seed: int, guest_load: bool, with_host_load: bool, keep_logs: bool = False,
-        max_boots: int = 20, mode: str = "hang", console_timeout: float = CONSOLE_TIMEOUT_S) -> Result:
-    board = qemu.Board.load("zynq7000_qemu")
-    images = qemu.prepare_images(board)
+        max_boots: int = 20, mode: str = "hang", console_timeout: float = CONSOLE_TIMEOUT_S,
+        board: qemu.Board | None = None, images: qemu.Images | None = None) -> Result:
+    board = board or qemu.Board.load("zynq7000_qemu")
+    images = images or qemu.prepare_images(board)
     rng = random.Random(seed)
     res = Result(guest_load=guest_load, host_load=with_host_load, mode=mode)
     hogs = host_load() if with_host_load else []
@@ -222,6 +229,7 @@ def run(rounds: int, seed: int, guest_load: bool, with_host_load: bool, keep_log
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--board", default="zynq7000_qemu", help="boards/NAME (default %(default)s)")
     ap.add_argument("--rounds", type=int, default=200)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--guest-load", action="store_true", help="a CPU hog in the guest beside servod")
@@ -235,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path)
     a = ap.parse_args(argv)
     res = run(a.rounds, a.seed, a.guest_load, a.host_load, a.keep_logs, max_boots=a.max_boots, mode=a.mode,
-              console_timeout=a.console_timeout)
+              console_timeout=a.console_timeout, board=qemu.Board.load(a.board))
     d = asdict(res) | {"rate": res.rate}
     print(f"[stress] {res.mode}: {res.rounds} rounds in {res.boots} boot(s): {res.passed} back, {res.slow} slow, "
           f"{res.lost} lost, "

@@ -1,9 +1,9 @@
 # Guest shell commands of the emulated controller demo on the ZynqMP
 # (scripts/demo.sh --board zynqmp_qemu; board.yaml demo.guest_commands),
 # one command a line, run on the Linux console of the A53: rpu_app on R5 0
-# through Linux's upstream xlnx_r5_remoteproc. Not yet here, unlike the
-# Zynq-7000's script: the hang and its recovery (servod's restart through
-# the upstream driver, issue 35 item 3; docs/boot-flow-zynqmp.md).
+# through Linux's upstream xlnx_r5_remoteproc. The hang's recovery is
+# servod's own there (the driver has no report_crash: servod stops and
+# starts R5 0 through remoteproc's state; docs/boot-flow-zynqmp.md).
 uname -a
 cat /sys/class/remoteproc/remoteproc0/name /sys/class/remoteproc/remoteproc0/state
 ls -l /lib/firmware
@@ -24,7 +24,14 @@ ampctl stats
 ampctl param list
 ampctl param set pos_kp 80
 ampctl param get pos_kp
-# 4. an operator's stop: the upstream driver powers R5 0 down; servod restarts nothing
+# 4. fault and recovery: hang the firmware; servod detects it and restarts it (stop: the driver
+#    powers R5 0 down through TF-A; start), parameters come back
+ampctl debug hang
+sleep 2
+tail -n 6 /tmp/servod.log
+ampctl status
+ampctl param get pos_kp
+# 5. an operator's stop: the upstream driver powers R5 0 down; servod restarts nothing
 echo stop > /sys/class/remoteproc/remoteproc0/state
 sleep 2
 cat /sys/class/remoteproc/remoteproc0/state

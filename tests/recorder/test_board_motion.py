@@ -27,6 +27,10 @@ Bounds (default parameters: pos_kp 60/s, PI velocity loop 0.5 A.s/rad and
 * final position = the program's end point (0, 0, 0) within 3 inc after
   0.5 s at rest: the velocity loop's integrator removes the static error
   (no Coulomb friction in the plant), the rest is the feedback's rounding.
+
+On both boards (the fixture is parametrized by board, one boot each): the
+same bounds on the R5 as on the A9 (the same plant and loops; the cycles
+are guest time on both).
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from typing import Any
 
 import pytest
 
+from board_params import BOARDS, board_images
 from servoamp import mcapio, netboard, plot, qemu
 from servoamp.record import RecordResult, record
 
@@ -60,12 +65,11 @@ def _ints(s: str) -> list[int]:
     return [int(x) for x in s.split(",")]
 
 
-@pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    tmp = tmp_path_factory.mktemp("board_motion")
-    out: dict[str, Any] = {"path": tmp / "motion.mcap", "tmp": tmp}
-    board = qemu.Board.load("zynq7000_qemu")
-    images = qemu.prepare_images(board)
+@pytest.fixture(scope="module", params=BOARDS)
+def run(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    board, images = board_images(request.param)
+    tmp = tmp_path_factory.mktemp(f"board_motion_{board.name}")
+    out: dict[str, Any] = {"path": tmp / "motion.mcap", "tmp": tmp, "board": board.name}
     with netboard.ControllerBoard(board, images) as cb:
         t0 = time.monotonic()
         cb.start_servod()
@@ -156,7 +160,7 @@ def test_squares_circles_runs_to_the_end_point(run: dict[str, Any]) -> None:
 
 def test_path_error_within_bounds(run: dict[str, Any]) -> None:
     s, st = run["stats"], run["done_st"]
-    print(f"\nsquares and circles on the board: path error max {s['motion.path_err.max_um']} um "
+    print(f"\nsquares and circles on {run['board']}: path error max {s['motion.path_err.max_um']} um "
           f"(line {s['motion.path_err.max_line']}), rms {s['motion.path_err.rms_um']} um; "
           f"following error max {s['motion.follow_err.max_um']} um "
           f"(line {s['motion.follow_err.max_line']}), rms {s['motion.follow_err.rms_um']} um; "

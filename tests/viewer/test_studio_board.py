@@ -15,7 +15,9 @@ sleeps while the guest idles (-icount sleep=on: about the host's pace):
 Studio 1.48 takes
 a live stream in at a few hundred messages a second in this browser
 (tools/viewer/README.md). The guest is paused (QMP stop) while the plots are
-read. The screenshots: build/viewer/board/studio-board*.png.
+read. The screenshots: build/viewer/board/<board>/studio-board*.png.
+
+On both boards (the fixture is parametrized by board, one boot each).
 """
 
 from __future__ import annotations
@@ -27,8 +29,9 @@ from typing import Any
 
 import pytest
 
+from board_params import BOARDS, board_images
 from recorder_helpers import TOP
-from servoamp import bridge, mcapio, netboard, qemu
+from servoamp import bridge, mcapio, netboard
 from test_studio_live import run_driver
 
 pytestmark = pytest.mark.board
@@ -38,11 +41,6 @@ GOOD, BAD = 70, 5000  # pos_kp in [0, 2000] on servod: taken, refused
 PERIOD_US = 10000
 ICOUNT = "shift=0,align=off,sleep=on"
 PROGRAM = "/usr/share/servoamp/examples/seed004_squares_circles.nc"
-
-
-@pytest.fixture(scope="module")
-def images() -> qemu.Images:
-    return qemu.prepare_images(qemu.Board.load("zynq7000_qemu"))
 
 
 def _hang_recover_and_run(cb: netboard.ControllerBoard) -> None:
@@ -59,20 +57,22 @@ def _hang_recover_and_run(cb: netboard.ControllerBoard) -> None:
     cb.ampctl(f"run {PROGRAM}", expected_rc=None)
 
 
-@pytest.fixture(scope="module")
-def board_view(images: qemu.Images, viewer_ready: None,
+@pytest.fixture(scope="module", params=BOARDS)
+def board_view(request: pytest.FixtureRequest, viewer_ready: None,
                tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    OUT.mkdir(parents=True, exist_ok=True)
-    for f in OUT.glob("*.png"):
+    board, images = board_images(request.param)
+    out_dir = OUT / board.name
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for f in out_dir.glob("*.png"):
         f.unlink()
-    mcap = tmp_path_factory.mktemp("viewer_board") / "board.mcap"
-    out: dict[str, Any] = {"mcap": mcap}
+    mcap = tmp_path_factory.mktemp(f"viewer_board_{board.name}") / "board.mcap"
+    out: dict[str, Any] = {"mcap": mcap, "board": board.name}
     # virtual time that sleeps while the guest idles (-icount sleep=on):
     # costs stay instruction counts (servod's period check refused 10 ms on
     # the host clock under load, a descheduled vCPU counted as cost), and
     # the idle guest keeps about the host's pace, which a person watches and
     # Studio 1.48 can take in (a few hundred messages a second)
-    with netboard.ControllerBoard(images=images, icount=ICOUNT) as cb:
+    with netboard.ControllerBoard(board, images, icount=ICOUNT) as cb:
         cb.start_servod()
         cb.start_firmware()
         cb.wait_telemetry()
@@ -102,7 +102,7 @@ def board_view(images: qemu.Images, viewer_ready: None,
 
         try:
             assert b.ws_url is not None
-            events, err_lines = run_driver(b.ws_url, OUT, good=GOOD, bad=BAD, timeout_s=150,
+            events, err_lines = run_driver(b.ws_url, out_dir, good=GOOD, bad=BAD, timeout_s=150,
                                            min_cycles=300,
                                            watchdog_s=420, on_event=on_event, name="board")
             out["kp_after"] = cb.ampctl("param get pos_kp").strip().splitlines()[-1]
@@ -148,7 +148,7 @@ def test_every_panel_shows_the_board(board_view: dict[str, Any]) -> None:
     assert int(counters["servod.cycles"]) > 0 and int(counters["servod.recoveries"]) == 1, counters
     # nothing absurd (a wrapped difference showed ~2^64 / 1 ms here once)
     assert all(int(v) < 1 << 40 for v in counters.values() if v.isdigit()), counters
-    assert (OUT / "studio-board.png").stat().st_size > 10_000
+    assert (OUT / board_view["board"] / "studio-board.png").stat().st_size > 10_000
 
 
 def test_parameters_panel_sets_through_servod(board_view: dict[str, Any]) -> None:
