@@ -124,6 +124,10 @@ class Campaign:
     ocm: int
     wd_limit: int = 10
     irqs: dict[str, Irq | None] = field(default_factory=dict)
+    # how a stall ends: a crash reported to remoteproc, whose recovery
+    # restarts the firmware (a driver with report_crash, the Zynq-7000's),
+    # or servod's own stop and start (the ZynqMP's upstream R5 driver)
+    report_crash: bool = True
 
     def irq(self, which: str) -> Irq:
         i = self.irqs.get(which)
@@ -202,7 +206,8 @@ def f_epoch(c: Campaign, o: Outcome, before: dict[str, str]) -> None:
     c.sh(f"sleep {SETTLE_S}")
     after = c.stats()
     n = c.log_count("servo line corrupt")
-    o.detected_by = f"Linux: peer error on the next cycle, {_delta(before, after, 'linux.peer_errors')} such cycles; crash reported" \
+    o.detected_by = f"Linux: peer error on the next cycle, {_delta(before, after, 'linux.peer_errors')} such cycles; " \
+        + ("crash reported" if c.report_crash else "stall on servod's record") \
         if n else "not detected"
     o.cycles = f"{c.wd_limit} (wd_limit) peer-error cycles" if n else "-"
     o.axes_stopped = "firmware restarted" if _delta(before, after, "linux.recoveries") else "no"
@@ -372,7 +377,8 @@ def run_one(c: Campaign, f: Fault) -> Outcome:
     ok, after = c.wait_attached_and_running()
     o.recovered = ok and (not f.held or not held.endswith("NOT back"))
     rec_n = _delta(before, after, "linux.recoveries")
-    o.recovery = held or ((f"remoteproc recovery ({rec_n}), parameters restored" if rec_n else
+    how = "remoteproc recovery" if c.report_crash else "servod's restart through remoteproc"
+    o.recovery = held or ((f"{how} ({rec_n}), parameters restored" if rec_n else
                            "no restart needed") if ok else "NOT recovered")
     o.crashes = c.alive()
     detected = bool(o.detected_by) and not o.detected_by.endswith("not detected") and \
@@ -400,7 +406,7 @@ def run_campaign(names: list[str] | None = None, *, board: netboard.ControllerBo
             cb.start_servod(SERVOD_ARGS)
             cb.start_firmware()
         ocm = cb.board.addr("servo", "mailbox", "base")
-        camp = Campaign(cb, ocm, irqs=board_irqs(cb.board))
+        camp = Campaign(cb, ocm, irqs=board_irqs(cb.board), report_crash=cb.has_report_crash())
         camp.wd_limit = int(cb.ampctl("param get wd_limit").split("=", 1)[1].split()[0])
         cb.wait_telemetry()
         stop = threading.Event()

@@ -17,7 +17,7 @@ Documentation     servod's recovery on the ZynqMP, in one boot, through the
 ...               towards the latch. The Zynq-7000's versions:
 ...               tests/robot/test_recovery_board.py,
 ...               test_operator_stop_board.py, test_recovery_stress.py
-...               (their netboard boots the Zynq-7000 only so far).
+...               (parametrized by board: they run on the ZynqMP too).
 Resource          ../resources/zynqmp.resource
 Resource          ../resources/servod.resource
 Suite Setup       Boot Recovery Board
