@@ -1,10 +1,10 @@
 """The demo's last step: the emulated controller live in Foxglove and into MCAP.
 
-    python -m servoamp.demo_record [--seconds N] [--out build/demo] [--keep-logs] [--program]
-                                   [--can] [--ws-port 8765]
+    python -m servoamp.demo_record [--board zynq7000_qemu|zynqmp_qemu] [--seconds N] [--out build/demo]
+                                   [--keep-logs] [--program] [--can] [--ws-port 8765]
 
-Boots the emulated board with networking (gem0 on QEMU user networking,
-host 127.0.0.1:PORT -> guest 7700, see servoamp.netboard), starts servod and
+Boots the emulated board (--board, default zynq7000_qemu) with networking
+(gem0 on QEMU user networking, host 127.0.0.1:PORT -> guest 7700, see servoamp.netboard), starts servod and
 the firmware, and runs ``servoamp bridge`` on its telemetry for N seconds
 (default 5): the Foxglove WebSocket server on ws://127.0.0.1:8765 (printed;
 another free port if that one is taken) and every cycle into
@@ -42,7 +42,7 @@ from servoamp.record import RecordResult
 
 
 PROGRAM = "/usr/share/servoamp/examples/seed004_squares_circles.nc"
-CAN_DRIVES = {0: "1,2", 1: "1,2"}   # bus -> node ids (boards/zynq7000_qemu/servo-can.dts)
+CAN_DRIVES = {0: "1,2", 1: "1,2"}   # bus -> node ids (boards/<board>/servo-can.dts)
 PROGRAM_MAX_S = 600.0                # host seconds a program may take on record
 
 
@@ -70,6 +70,8 @@ def _say(msg: str) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m servoamp.demo_record", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--board", default="zynq7000_qemu",
+                    help="board folder under boards/ (default: %(default)s; zynqmp_qemu: the servo on R5 0)")
     ap.add_argument("--seconds", type=float, default=5.0, help="recording length in host seconds (default 5; on virtual time the guest may run faster)")
     ap.add_argument("--out", type=Path, default=qemu.REPO / "build" / "demo",
                     help="output folder (default build/demo)")
@@ -91,7 +93,10 @@ def main(argv: list[str] | None = None) -> int:
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     mcap = out / "run.mcap"
-    board = qemu.Board.load("zynq7000_qemu")
+    board = qemu.Board.load(args.board)
+    if not args.no_fault and not board.data.get("demo", {}).get("hang", True):
+        _say(f"{board.name}: no firmware hang on record (board.yaml demo.hang: its recovery is not there yet)")
+        args.no_fault = True
     images = qemu.prepare_images(board)
     _say(f"images ready ({time.monotonic() - t0:.1f} s)")
     cb = netboard.ControllerBoard(board, images, host_port=args.port or None,
@@ -100,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
                                   can_log=out if args.can else None)
     asc: dict[int, Path] = {}
     with cb:
-        _say(f"booted with gem0 on QEMU user networking: 127.0.0.1:{cb.host_port} -> "
+        _say(f"{board.name}: booted with gem0 on QEMU user networking: 127.0.0.1:{cb.host_port} -> "
              f"guest {netboard.GUEST_ADDR.split('/')[0]}:{netboard.TELEMETRY_PORT} "
              f"({time.monotonic() - t0:.1f} s)")
         cb.start_servod()

@@ -15,8 +15,10 @@ class GuestClock:
       wake-up latency, and ``t_cycle``, the servo core's global timer at
       ``clock_hz``, 32 bits, at the start of the same cycle). The median of
       the first SAMPLES records. Each ``t_cycle`` is unwrapped to the value
-      nearest the event (Linux's clocksource is the same timer: the two
-      differ by milliseconds, not by half a wrap, 21 s at 100 MHz).
+      nearest the event: on the Zynq-7000 Linux's clocksource is the same
+      timer (the two differ by milliseconds, not by half a wrap, 21 s at
+      100 MHz); on the ZynqMP the R5's cycle counter (1 GHz) starts with the
+      firmware and wraps every 4.3 s, so this is known only modulo a wrap.
     * virtual - gt, from the master's time stamp on the bus (CiA 301
       0x1013: the global timer in us, 32 bits, on PDO 0x1FF, the first frame
       of a master's cycle, rpu_app/src/canopen_master.h): sent on an idle
@@ -26,7 +28,12 @@ class GuestClock:
       clocksource, so this is not a constant of the emulator; modulo 2^32 us
       (71 min). A stamp behind other frames on the bus is not used.
 
-    Known once both are: a boot's constant."""
+    Known once both are: a boot's constant, modulo the servo timer's wrap
+    (2^32 ticks at ``clock_hz``). The wrap is resolved by the emulator's
+    clock and Linux's: both start at the machine's reset or shortly after
+    it (Linux's CLOCK_MONOTONIC from its timekeeping's start, a fraction of
+    a guest second into the boot), so virtual - monotonic is taken in
+    [0, one wrap): 4.3 s at the R5's 1 GHz, 43 s at the A9's 100 MHz."""
 
     SAMPLES = 33
     WRAP_US = 1 << 32
@@ -35,13 +42,14 @@ class GuestClock:
         self.samples: list[int] = []
         self.gt_minus_mono_ns: int | None = None
         self.virt_minus_gt_ns: int | None = None
+        self.wrap_ns: int | None = None      # 2^32 servo ticks, from the records' clock_hz
 
     @property
     def offset_ns(self) -> int | None:
-        """virtual - monotonic, once known."""
-        if self.gt_minus_mono_ns is None or self.virt_minus_gt_ns is None:
+        """virtual - monotonic, once known, in [0, wrap_ns)."""
+        if self.gt_minus_mono_ns is None or self.virt_minus_gt_ns is None or not self.wrap_ns:
             return None
-        return self.virt_minus_gt_ns + self.gt_minus_mono_ns
+        return (self.virt_minus_gt_ns + self.gt_minus_mono_ns) % self.wrap_ns
 
     def add_cycle(self, t_ns: int, wake_latency_ns: int, t_cycle: int, clock_hz: int) -> bool:
         """One fresh cycle record; True when this made the offset known."""
@@ -49,6 +57,7 @@ class GuestClock:
             return False
         event = t_ns - wake_latency_ns
         wrap = 1 << 32
+        self.wrap_ns = wrap * 1_000_000_000 // clock_hz
         k = round((event * clock_hz / 1e9 - t_cycle) / wrap)
         gt_ns = (t_cycle + k * wrap) * 1_000_000_000 // clock_hz
         self.samples.append(gt_ns - event)

@@ -301,12 +301,23 @@ class ControllerBoard:
         self.sh(f"umask 077; echo {self.token} > {TOKEN_FILE}")
         return f"--telemetry {GUEST_ADDR.split('/')[0]}:{TELEMETRY_PORT} --telemetry-token {TOKEN_FILE}"
 
+    def servod_board_args(self) -> str:
+        """servod's options that name the board: its controller id (the
+        board's name, in the telemetry's HELLO and the recordings) and the
+        rate of the servo core's time base (board.yaml servo.clock_hz: the
+        feedback's t_cycle, which the bridge puts the CAN frames on)."""
+        hz = self.board.servo.get("clock_hz")
+        return f"--id {self.board.name}" + (f" --servo-clock-hz {int(hz)}" if hz else "")
+
     def start_servod(self, args: str = "") -> None:
         """servod in the background, its log in /tmp/servod.log; waits until
         it runs (and, with telemetry, listens). Without a --telemetry in
-        args, telemetry is on the guest's address with this boot's token."""
+        args, telemetry is on the guest's address with this boot's token;
+        without --id, the board's options (:meth:`servod_board_args`)."""
         if "--telemetry" not in args:
             args = f"{self.telemetry_args()} {args}".strip()
+        if "--id" not in args:
+            args = f"{self.servod_board_args()} {args}".strip()
         self.sh(f"rm -f {SERVOD_LOG}; (servod {args} > {SERVOD_LOG} 2>&1 &)")
         self.wait_servod_log("waiting for the servo")
 

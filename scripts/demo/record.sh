@@ -5,7 +5,7 @@
 # through the bridge and a firmware hang/recovery on record), plots into
 # build/demo/plots/, and print `servoamp info`. Arguments go to
 # python -m servoamp.demo_record (--seconds N, --out DIR, --keep-logs,
-# --no-fault, --program, --ws-port P).
+# --no-fault, --program, --can, --board B, --ws-port P).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$here"

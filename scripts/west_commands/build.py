@@ -5,10 +5,14 @@
     west build -b zynq7000_qemu -d /tmp/b rpu_app  # another build directory
     west build -p always -b zynq7000_qemu rpu_app  # start from an empty build dir
     west build -b zynq7000_qemu rpu_app -- AMP_LIB=0 MMU=0   # extra make arguments
+    west build -b zynqmp_qemu --variant can rpu_app  # boards/zynqmp_qemu/servo-can.dts: the axes on
+                                                     # CAN drives, build/rpu_app/zynqmp_qemu-can
 
 Only the application's Makefile builds (rpu_app/Makefile): this command
-resolves the board (boards/<board>/servo.dts must exist), the source and
-build directories, applies the pristine policy and runs make. Outputs of
+resolves the board (boards/<board>/servo.dts must exist) and the variant
+(``--variant V``: boards/<board>/servo-V.dts, the build directory
+build/<app>/<board>-V, the same folders as the images' builds in
+python/servoamp/images.py), the source and build directories, applies the pristine policy and runs make. Outputs of
 rpu_app: servo.elf (with resource table), servo-norsc.elf (without), the
 generated board_config.h / board_memory.ld, link maps, and qemu-stub.elf
 (for QEMU runs without Linux).
@@ -49,6 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         choices=["auto", "always", "never"],
                         help="empty the build directory first: auto (default, on board/app change), always, never; "
                              "-p alone means always")
+    parser.add_argument("--variant", help="a devicetree variant of the board: boards/<board>/servo-VARIANT.dts "
+                                          "(e.g. can: the axes on CiA 402 drives over CAN)")
     parser.add_argument("-j", "--jobs", type=int, default=2, help="make -j value (default: %(default)s)")
     parser.add_argument("-v", "--verbose", action="store_true", help="show full compiler command lines")
     parser.add_argument("source_dir", nargs="?", default="rpu_app",
@@ -98,12 +104,18 @@ def run(args: argparse.Namespace) -> int:
         raise BuildError("no board: use -b BOARD (available: " + ", ".join(boards()) + ")")
     if board not in boards():
         raise BuildError(f"unknown board '{board}' (available: {', '.join(boards())})")
+    dts = None
+    if args.variant:
+        dts = REPO / "boards" / board / f"servo-{args.variant}.dts"
+        if not dts.is_file():
+            have = sorted(p.stem[len("servo-"):] for p in (REPO / "boards" / board).glob("servo-*.dts"))
+            raise BuildError(f"board '{board}' has no variant '{args.variant}' (available: {', '.join(have) or 'none'})")
     if args.build_dir is None:
-        build_dir = REPO / "build" / app.name / board
+        build_dir = REPO / "build" / app.name / (board + (f"-{args.variant}" if args.variant else ""))
     build_dir = build_dir.resolve()
 
     marker = read_marker(build_dir)
-    want = {"board": board, "source": str(app)}
+    want = {"board": board, "source": str(app)} | ({"variant": args.variant} if args.variant else {})
     if args.pristine == "always":
         make_pristine(build_dir)
     elif args.pristine == "auto" and marker is not None and marker != want:
@@ -120,8 +132,9 @@ def run(args: argparse.Namespace) -> int:
 
     extra = [a for a in args.make_args if a != "--"]
     cmd = ["make", "-C", str(app), f"-j{args.jobs}", f"BOARD={board}", f"BUILD={build_dir}",
-           f"PYTHON={sys.executable}"] + (["V=1"] if args.verbose else []) + extra
-    print(f"-- west build: board {board}, source {app}, build dir {build_dir}")
+           f"PYTHON={sys.executable}"] + ([f"DTS={dts}"] if dts else []) + (["V=1"] if args.verbose else []) + extra
+    print(f"-- west build: board {board}{f', variant {args.variant}' if args.variant else ''}, source {app}, "
+          f"build dir {build_dir}")
     print("-- west build: " + " ".join(cmd))
     rc = subprocess.call(cmd, env=dict(os.environ))
     if rc == 0:

@@ -373,31 +373,40 @@ def test_guest_clock_offset_from_cycle_records_and_stamps() -> None:
     """bridge.GuestClock: the emulator's virtual time on the cycle records'
     clock. gt - monotonic from (t_ns, wake-up latency, t_cycle) of fresh
     records (median of SAMPLES, 32-bit t_cycle unwrapped), virtual - gt
-    from the master's time stamp (32-bit us) at its start on the bus."""
+    from the master's time stamp (32-bit us) at its start on the bus.
+    The Zynq-7000: the A9 global timer at 100 MHz, Linux's clocksource
+    (a few ms apart); the ZynqMP: the R5's cycle counter at 1 GHz, started
+    with the firmware 37 s after Linux's clock, wrapping every 4.3 s (gt -
+    monotonic known modulo a wrap). Virtual - monotonic is under a wrap
+    (Linux's timekeeping starts 0.45 s into the emulator's clock)."""
+    virt_mono = 450_000_000
+    for hz, gt_mono in ((100_000_000, 6_512_000), (1_000_000_000, -37_000_000_000)):
+        virt_gt = virt_mono - gt_mono
+        wrap_ns = (1 << 32) * 1_000_000_000 // hz
+        wrap_s = wrap_ns / 1e9              # 42.9 s, 4.3 s
+        for start_s in (38.0, 37 + wrap_s - 0.01, 37 + 3 * wrap_s + 7.0):   # before, at and after wraps
+            c = bridge.GuestClock()
+            known = []
+            for k in range(bridge.GuestClock.SAMPLES):
+                event = int((start_s + k * 1e-3) * 1e9)          # the cycle interrupt, monotonic
+                lat = 20_000 + 1_000 * (k % 7)
+                ticks = ((event + gt_mono) * hz // 1_000_000_000 + 3) % (1 << 32)   # servo: 3 ticks late
+                if k == 5:
+                    ticks = (ticks - hz // 1000) % (1 << 32)       # a record of the cycle before
+                known.append(c.add_cycle(event + lat, lat, ticks, hz))
+            assert not any(known) and c.offset_ns is None       # no stamp yet
+            assert c.gt_minus_mono_ns is not None
+            assert abs((c.gt_minus_mono_ns - gt_mono + wrap_ns // 2) % wrap_ns - wrap_ns // 2) <= 40
+            gt_us = (int(start_s * 1e9) + gt_mono) // 1000 + 1234   # a stamp: the timer in us, 32 bits
+            assert c.add_stamp(virt_gt + gt_us * 1000, gt_us % (1 << 32))
+            off = virt_mono
+            assert c.offset_ns is not None and abs(c.offset_ns - off) <= 40, (hz, start_s, c.offset_ns)
+            assert abs(c.to_monotonic(off + 2_000_000_000) - 2_000_000_000) <= 40
+            # known once and for all: later records and stamps do not move it
+            assert not c.add_cycle(10**12, 0, 0, hz) and not c.add_stamp(0, 5)
+            assert abs(c.offset_ns - off) <= 40
     hz = 100_000_000
-    gt_mono = 6_512_000                 # the global timer ahead of CLOCK_MONOTONIC
-    virt_gt = 103_456_789_000           # virtual time when Linux zeroed the timer: 103 s
-    wrap_s = (1 << 32) / hz             # 42.9 s
-    for start_s in (5.0, wrap_s - 0.01, 3 * wrap_s + 7.0):   # before, at and after wraps
-        c = bridge.GuestClock()
-        known = []
-        for k in range(bridge.GuestClock.SAMPLES):
-            event = int((start_s + k * 1e-3) * 1e9)          # the cycle interrupt, monotonic
-            lat = 20_000 + 1_000 * (k % 7)
-            ticks = ((event + gt_mono) * hz // 1_000_000_000 + 3) % (1 << 32)   # servo: 3 ticks late
-            if k == 5:
-                ticks = (ticks - hz // 1000) % (1 << 32)       # a record of the cycle before
-            known.append(c.add_cycle(event + lat, lat, ticks, hz))
-        assert not any(known) and c.offset_ns is None       # no stamp yet
-        assert c.gt_minus_mono_ns is not None and abs(c.gt_minus_mono_ns - gt_mono) <= 40
-        gt_us = int(start_s * 1e6) + 1234                   # a stamp: the timer in us, 32 bits
-        assert c.add_stamp(virt_gt + gt_us * 1000, gt_us % (1 << 32))
-        off = virt_gt + gt_mono
-        assert c.offset_ns is not None and abs(c.offset_ns - off) <= 40, (start_s, c.offset_ns)
-        assert abs(c.to_monotonic(off + 2_000_000_000) - 2_000_000_000) <= 40
-        # known once and for all: later records and stamps do not move it
-        assert not c.add_cycle(10**12, 0, 0, hz) and not c.add_stamp(0, 5)
-        assert abs(c.offset_ns - off) <= 40
+    virt_gt = virt_mono
     # the stamp first, then the records
     c = bridge.GuestClock()
     assert not c.add_stamp(virt_gt + 7_000_000, 7_000)

@@ -1,9 +1,12 @@
 """The whole controller on CiA 402 drives over CAN (issue 22, item 6), one
-QEMU boot on virtual time.
+QEMU boot on virtual time per board (the fixture is parametrized by board:
+BOARDS; `-k zynqmp_qemu` picks one).
 
 The board runs Linux, servod and the servo firmware built for
-boards/zynq7000_qemu/servo-can.dts (rpu_app-can.elf: its four axes on CAN
-drives, nodes 1 and 2 on each of the two buses). Each bus is linked in
+boards/<board>/servo-can.dts (rpu_app-can.elf: its four axes on CAN
+drives, nodes 1 and 2 on each of the two buses): on the Zynq-7000 the
+servo core is the A9's CPU1 with CAN0/CAN1 of the PS, on the ZynqMP R5 0
+with the LPD's CAN0/CAN1 (the same IP; issue 35, item 4). Each bus is linked in
 lockstep to its own drive simulator (servoamp-drivesim) and to a
 python-can logger (can.logger, ASC; a listener, so QEMU waits for it) through QEMU's can-host-lockstep
 backend (docs/canlink.md, docs/fieldbus.md). The servo core is the CANopen
@@ -65,6 +68,7 @@ pytestmark = pytest.mark.board
 REPO = Path(__file__).resolve().parents[2]
 WS_CHECK = REPO / "tools" / "mcap-verify" / "ws-check.mjs"
 PROGRAM = "/usr/share/servoamp/examples/seed004_squares_circles.nc"
+BOARDS = ["zynq7000_qemu", "zynqmp_qemu"]
 DRIVES = {0: "1,2", 1: "1,2"}          # bus -> node ids (servo-can.dts)
 AXES = 4
 PERIOD_NS = 1_000_000                  # servod's default cycle (1 kHz)
@@ -103,15 +107,15 @@ def _enabled(st: dict[str, str]) -> bool:
     return all(st.get(f"axis{i}.drive") == "operation-enabled" for i in range(AXES))
 
 
-@pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    board = qemu.Board.load("zynq7000_qemu")
+@pytest.fixture(scope="module", params=BOARDS)
+def run(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    out: dict[str, Any] = {"board": request.param}
+    board = qemu.Board.load(request.param)
     images = qemu.prepare_images(board)
     assert any(f.name == "rpu_app-can.elf" for f in images.firmware), images.firmware
     cb = netboard.ControllerBoard(board, images, can_drives=DRIVES,
-                                  can_log=tmp_path_factory.mktemp("can_board"))
-    out["mcap"] = tmp_path_factory.mktemp("can_bridge") / "run.mcap"
+                                  can_log=tmp_path_factory.mktemp(f"can_board_{board.name}"))
+    out["mcap"] = tmp_path_factory.mktemp(f"can_bridge_{board.name}") / "run.mcap"
     with cb:
         t0 = time.monotonic()
         cb.start_servod()
@@ -440,7 +444,8 @@ def test_frames_live_through_the_reference_client(run: dict[str, Any]) -> None:
 
 
 def _bus_offset_us(run: dict[str, Any], b: int) -> float:
-    """The firmware's t_us (the global timer's microseconds) minus the
+    """The firmware's t_us (its time base in microseconds: the A9 global
+    timer, or the R5's cycle counter) minus the
     logger's time (us) on bus b, from the master's time stamps (PDO 0x1FF:
     the same timer in us, sent as the first frame of a cycle on an idle bus,
     so it starts on the bus when written; its start is its end minus its

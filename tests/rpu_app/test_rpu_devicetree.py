@@ -12,6 +12,7 @@ import sys
 import pytest
 
 from rpu_common import BOARD, CONTRACT, REPO, parse_board_config
+from servoamp import qemu
 
 DTS = REPO / "boards" / BOARD / "servo.dts"
 GEN = REPO / "rpu_app" / "scripts" / "gen_board_header.py"
@@ -54,6 +55,9 @@ def test_generator_output(tmp_path):
     assert ("0x1f000000", "0x00f00000", "MMU_NORMAL_WB") in mmu
     assert ("0xfff00000", "0x00100000", "MMU_NORMAL_NC") in mmu
     assert {m[0] for m in mmu if m[2] == "MMU_DEVICE"} == {"0xe0000000", "0xf8000000", "0xf8f00000"}
+    # the servo's clock in board.yaml (servod's --servo-clock-hz, the
+    # bridge's clock for the CAN frames) is the time base's
+    assert qemu.Board.load(BOARD).servo["clock_hz"] == cfg["BOARD_TIMEBASE_TICKS_PER_US"] * 1_000_000
 
 
 def test_generator_is_idempotent(tmp_path):

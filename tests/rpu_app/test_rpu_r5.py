@@ -120,3 +120,29 @@ def test_elf_is_what_the_upstream_driver_loads(build: Path) -> None:
                            text=True).stdout
     assert "Tag_CPU_arch_profile: Realtime" in attrs, attrs   # ARMv7-R
     assert "VFPv3-D16" in attrs, attrs
+
+
+def test_can_variant_uses_the_lpd_can_controllers(tmp_path: Path) -> None:
+    """servo-can.dts (issue 35, item 4): the four axes on CiA 402 drives,
+    two per bus, on the ZynqMP's CAN0/CAN1 where QEMU's xlnx-zcu102 puts
+    them (hw/arm/xlnx-zynqmp.c: 0xff060000/0xff070000, SPI 23/24), at QEMU's
+    24 MHz CAN_REF_CLK (1 Mbit/s reachable), both mapped by the MPU as
+    device memory and nothing else added."""
+    r = gen(DTS.with_name("servo-can.dts"), tmp_path)
+    assert r.returncode == 0, r.stderr
+    cfg = parse_board_config(tmp_path / "board_config.h")
+    assert (cfg["BOARD_CAN0_BASE"], cfg["BOARD_CAN0_IRQ"]) == (0xFF060000, 32 + 23)
+    assert (cfg["BOARD_CAN1_BASE"], cfg["BOARD_CAN1_IRQ"]) == (0xFF070000, 32 + 24)
+    assert (cfg["BOARD_CAN_REF_HZ"], cfg["BOARD_CAN_BITRATE"]) == (24_000_000, 1_000_000)
+    assert (cfg["BOARD_CAN_AXES"], cfg["BOARD_CAN_USED_MASK"]) == (4, 3)
+    header = (tmp_path / "board_config.h").read_text()
+    assert "X(0, AXIS_BACKEND_CAN, 0, 1)" in header and "X(3, AXIS_BACKEND_CAN, 1, 2)" in header
+    mpu = re.findall(r"X\((0x[0-9a-f]+)u, (0x[0-9a-f]+)u, (MPU_\w+)\)", header)
+    assert ("0xff060000", "0x00001000", "MPU_DEVICE") in mpu and ("0xff070000", "0x00001000", "MPU_DEVICE") in mpu
+    assert 1 + len(mpu) <= 16
+    # the model axes' build (servo.dts) maps no CAN controller
+    r = gen(DTS, tmp_path / "model")
+    assert r.returncode == 0, r.stderr
+    assert "ff060000u" not in (tmp_path / "model" / "board_config.h").read_text().split("BOARD_MPU_REGIONS")[-1]
+    # the servo's clock in board.yaml (servod's --servo-clock-hz) is the time base's
+    assert qemu.Board.load(BOARD).servo["clock_hz"] == cfg["BOARD_TIMEBASE_TICKS_PER_US"] * 1_000_000

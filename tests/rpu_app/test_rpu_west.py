@@ -87,3 +87,20 @@ def test_build_py_without_west(tmp_path, toolchain):
     r = run([sys.executable, str(BUILD_PY), "-b", BOARD, "-d", str(d), "rpu_app"], cwd=tmp_path)
     assert r.returncode == 0, r.stdout + r.stderr
     assert (d / "servo.elf").is_file()
+
+
+@pytest.mark.parametrize("board", ["zynq7000_qemu", "zynqmp_qemu"])
+def test_west_build_can_variant(workspace, board):
+    """--variant can: boards/<board>/servo-can.dts (the four axes on CAN
+    drives) into build/rpu_app/<board>-can, where the images' build puts it
+    (python/servoamp/images.py); the R5's too (issue 35, item 4)."""
+    r = run([west_bin(), "build", "-b", board, "--variant", "can", "rpu_app"], cwd=workspace)
+    assert r.returncode == 0, r.stdout + r.stderr
+    out = workspace / "build" / "rpu_app" / f"{board}-can"
+    assert (out / "servo.elf").is_file()
+    hdr = (out / "board_config.h").read_text()
+    assert "#define BOARD_CAN_AXES BOARD_U(4)" in hdr and f'"{board}"' in hdr
+    assert json.loads((out / ".servoamp-build.json").read_text()) == {
+        "board": board, "source": str(workspace / "rpu_app"), "variant": "can"}
+    r = run([west_bin(), "build", "-b", board, "--variant", "nope", "rpu_app"], cwd=workspace)
+    assert r.returncode != 0 and "no variant 'nope'" in (r.stdout + r.stderr)
