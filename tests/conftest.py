@@ -16,7 +16,8 @@ Two QEMUs at once (``scripts/test.sh -j 2``: pytest-xdist with
 ``--dist loadgroup``): every host test is in one group, run in order on
 one worker as before (they share build/ and make's outputs); a board
 test file is a group of its own (one boot per module, as its fixtures
-want), and each Robot suite is one. -icount keeps what a guest sees
+want; a file parametrized by board is a group per board), and each
+Robot suite is one. -icount keeps what a guest sees
 independent of how many QEMUs share the host; the images are prepared
 under a lock (servoamp.images)."""
 
@@ -110,7 +111,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             elif item.path.suffix == ".py" and "robot_suite" in item.name:
                 group = item.nodeid           # one Robot suite, one boot
             else:
-                group = item.path.as_posix()  # a test file: its boots share module fixtures
+                # a test file on one board: its boots share module fixtures
+                # (a file parametrized by board boots each board once: the
+                # two boards' halves may run on two workers at once)
+                group = f"{item.path.as_posix()}@{board}"
             item.add_marker(pytest.mark.xdist_group(group))
     if drop:
         config.hook.pytest_deselected(items=drop)
