@@ -247,5 +247,6 @@ def test_recording_shows_the_square_and_the_circle(run: dict[str, Any]) -> None:
     assert xy.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and xy.stat().st_size > 10_000
     dest = qemu.REPO / "build" / "test-artifacts"
     dest.mkdir(parents=True, exist_ok=True)
-    (dest / "squares_circles_xy_path.png").write_bytes(xy.read_bytes())
-    print(f"\nXY plot: {dest / 'squares_circles_xy_path.png'}")
+    png = dest / f"squares_circles_xy_path-{run['board']}.png"
+    png.write_bytes(xy.read_bytes())
+    print(f"\nXY plot: {png}")

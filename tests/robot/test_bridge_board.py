@@ -15,7 +15,9 @@ Before that, who may set (issue 21, python/servoamp/wsfront.py): a web page
 of a foreign origin is refused before the upgrade and its setParameters
 never reaches the firmware; a viewer of an allowed origin without the
 bridge's token lists the parameters read-only, its set refused; `ampctl
-param get` on the board shows pos_kp unchanged after both."""
+param get` on the board shows pos_kp unchanged after both.
+
+On both boards (the fixture is parametrized by board, one boot each)."""
 
 from __future__ import annotations
 
@@ -28,7 +30,8 @@ from typing import Any
 
 import pytest
 
-from servoamp import bridge, info, netboard, qemu, wsprobe
+from board_params import BOARDS, board_images
+from servoamp import bridge, info, netboard, wsprobe
 from servoamp.record import RecordResult
 
 pytestmark = pytest.mark.board
@@ -37,13 +40,14 @@ REPO = Path(__file__).resolve().parents[2]
 WS_CHECK = REPO / "tools" / "mcap-verify" / "ws-check.mjs"
 
 
-@pytest.fixture(scope="module")
-def run(images: qemu.Images, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+@pytest.fixture(scope="module", params=BOARDS)
+def run(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    board, images = board_images(request.param)
     if not (REPO / "tools" / "mcap-verify" / "node_modules" / "@foxglove" / "ws-protocol").is_dir():
         pytest.fail("tools/mcap-verify/node_modules misses @foxglove/ws-protocol: "
                     "run scripts/bootstrap.sh")
-    out: dict[str, Any] = {"path": tmp_path_factory.mktemp("bridge_board") / "run.mcap"}
-    with netboard.ControllerBoard(images=images) as cb:
+    out: dict[str, Any] = {"path": tmp_path_factory.mktemp(f"bridge_board_{board.name}") / "run.mcap"}
+    with netboard.ControllerBoard(board, images) as cb:
         cb.start_servod()
         cb.start_firmware()
         cb.wait_telemetry()
