@@ -152,7 +152,8 @@ def main(argv: list[str] | None = None) -> int:
             time.sleep(min(1.0, args.seconds / 4))
             cb.ampctl("debug hang")
             cb.wait_servod_log("recovery complete")
-            _say("firmware hung on purpose: servod detected it, remoteproc recovered it")
+            _say("firmware hung on purpose: servod detected it, the firmware restarted through remoteproc "
+                 "(its recovery, or servod's own stop and start where the driver has no report_crash)")
         th.join()
         b.close()
         res = box["r"]
