@@ -53,7 +53,7 @@ ARM_CPU_FREQ of 1 GHz, the rate servo.dts gives), so a tick is one
 instruction. Both cores share that one
 instruction clock (single-threaded TCG runs them in turn): Linux's work in
 ns counts CPU0's instructions as long as CPU1 sleeps in wfi meanwhile,
-which it does in Linux's half of the cycle (docs/cycle.md, section 7).
+which it does in Linux's half of the cycle (docs/cycle-figures.md, "Figures").
 
 QEMU is not cycle-accurate: these figures describe the emulator on this
 host (TCG, shared machine), not a Zynq-7000.

@@ -24,7 +24,7 @@ done
 # servod's wake-up (it wakes servod's read() on /dev/uioN): FIFO 81, above
 # servod's cycle thread (80) and every other interrupt thread (50:
 # Ethernet, UART), so neither the network nor the console delays the cycle
-# (docs/cycle.md, "Priorities under PREEMPT_RT"). Linux runs on CPU0 only
+# (docs/cycle-rt.md). Linux runs on CPU0 only
 # (maxcpus=1). On the vanilla kernel that thread exists but never runs (the
 # hard interrupt wakes servod): its priority does not matter there.
 # Only where the cycle interrupt's driver bound a device (a board whose

@@ -14,7 +14,8 @@
  *   path_error.c    a run's path and following error
  *   session.c       the session state machine
  *   supervisor.c    the supervisor: remoteproc, session, crash report, restarts,
- *                   the fault latch ("fault"), restore
+ *                   restore
+ *   fault.c         the fault latch, "fault [reset]", the recovery status lines
  *   recovery.c      the bounds on recovery: restarts in a window, backoff
  *   params.c        the parameter set: file, servo, "param" request
  *   mailbox.c       requests to the servo; "raw", "resume", "debug"
@@ -122,8 +123,17 @@ void supervise(struct servod *sd);
  * A client that keeps requests in flight never keeps the supervisor out.
  */
 void servod_pass(struct servod *sd, int *busy);
-/* The recovery lines of `ampctl status` and `ampctl fault` (supervisor.c). */
+/* The recovery lines of `ampctl status` and `ampctl fault` (fault.c). */
 void supervisor_format(struct servod *sd, struct out *o);
+/* The supervisor's pieces shared with fault.c (main thread): one restart
+ * too many latches the fault (why: its cause), every pass while latched,
+ * a restart's stop next (the attach it stops noted), remoteproc's state
+ * holding the firmware powered, ms as seconds for a log line. */
+void supervisor_latch(struct servod *sd, const char *rs, const char *why);
+void supervisor_latched_pass(struct servod *sd, const char *rs);
+void supervisor_note_stop_phase(struct servod *sd);
+int supervisor_rs_powered(const char *rs);
+const char *supervisor_secs(char *buf, size_t n, uint64_t ms);
 /* Telemetry (telemetry.c). */
 int telemetry_parse_opt(struct servod_opts *o);
 int telemetry_check_access(struct servod_opts *o);

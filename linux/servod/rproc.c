@@ -5,6 +5,7 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "rproc.h"
 #include "sysfs.h"
@@ -96,6 +97,14 @@ const char *rproc_state(struct rproc *rp)
 	return rp->state;
 }
 
+int rproc_has(const struct rproc *rp, const char *attr)
+{
+	char path[600];
+
+	snprintf(path, sizeof(path), "%s/%s", rp->dir, attr);
+	return access(path, F_OK) == 0;
+}
+
 int rproc_report_crash(const struct rproc *rp, char *path, size_t n)
 {
 	snprintf(path, n, "%s/device/report_crash", rp->dir);
@@ -112,6 +121,12 @@ int rproc_write_recovery(const struct rproc *rp, const char *what, char *path, s
 {
 	snprintf(path, n, "%s/recovery", rp->dir);
 	return sysfs_write(path, what);
+}
+
+int rproc_read_recovery(const struct rproc *rp, char *buf, size_t bn, char *path, size_t n)
+{
+	snprintf(path, n, "%s/recovery", rp->dir);
+	return sysfs_read(path, buf, bn);
 }
 
 int rproc_trace_path(char *path, size_t n)

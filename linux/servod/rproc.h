@@ -3,7 +3,8 @@
  * rproc.h - the servo core's remoteproc instance in sysfs: its state
  * (read, and written: start, stop), its recovery setting, the driver's
  * report_crash attribute (docs/ABI/sysfs-servoamp-remoteproc; servoamp's
- * Zynq-7000 driver only) and the firmware's trace buffer in debugfs.
+ * Zynq-7000 driver only: the upstream xlnx_r5_remoteproc has none, and
+ * rproc_has() tells which) and the firmware's trace buffer in debugfs.
  *
  * Which instance: the one the OCM mailbox's devicetree node names
  * (servoamp,remoteproc = <&its node>, devicetree/bindings/sram/
@@ -23,6 +24,7 @@
 struct rproc {
 	char dir[300];		/* /sys/class/remoteproc/remoteprocN, "" until found */
 	char state[32];		/* the last state read (rproc_state()) */
+	int report_crash;	/* the driver has device/report_crash (supervisor.c looks once per instance) */
 };
 
 /* The one lookup: the entry ("remoteprocN") the mailbox names (or named
@@ -32,6 +34,8 @@ int rproc_lookup(char *entry, size_t n);
 int rproc_find(struct rproc *rp);
 /* "offline", "running", "crashed", ... or "absent" (looked up again next time). */
 const char *rproc_state(struct rproc *rp);
+/* 1 if the instance's directory has attr ("recovery", "device/report_crash"), else 0. */
+int rproc_has(const struct rproc *rp, const char *attr);
 /* Writes "watchdog" to the driver's report_crash (its path in path): 0 or -1 (errno). */
 int rproc_report_crash(const struct rproc *rp, char *path, size_t n);
 /* Writes "start" or "stop" to state (the write returns once remoteproc has
@@ -40,6 +44,8 @@ int rproc_write_state(const struct rproc *rp, const char *what, char *path, size
 /* Writes "enabled" or "disabled" to recovery (what report_crash makes
  * remoteproc do): 0 or -1 (errno). */
 int rproc_write_recovery(const struct rproc *rp, const char *what, char *path, size_t n);
+/* Reads recovery into buf ("enabled", "disabled"): 0 or -1 (errno). */
+int rproc_read_recovery(const struct rproc *rp, char *buf, size_t bn, char *path, size_t n);
 /* The firmware's trace buffer (debugfs trace0): 0, or -1 (no instance yet). */
 int rproc_trace_path(char *path, size_t n);
 

@@ -3,12 +3,14 @@
  * supervisor.c - the supervisor (main thread, every pass of the main loop):
  * follows remoteproc's view of the servo through the session state machine
  * (session.h), initialises the region only while the servo is offline,
- * reports a stall the cycle thread saw to remoteproc (report_crash) and
- * restarts the firmware itself through remoteproc's state (stop, start),
- * within the bounds of recovery.h: a failed restart is retried with
- * backoff, one restart too many within the window latches a fault (the
- * firmware left stopped) until the operator's "fault reset". It loads the
- * parameter set into the servo after every attach.
+ * reports a stall the cycle thread saw to remoteproc (report_crash, where
+ * the driver has it; the upstream R5 driver has not: the stall is then
+ * servod's own record) and restarts the firmware itself through
+ * remoteproc's state (stop, start), within the bounds of recovery.h: a
+ * failed restart is retried with backoff, one restart too many within the
+ * window latches a fault (fault.c: the firmware left stopped) until the
+ * operator's "fault reset". It loads the parameter set into the servo
+ * after every attach.
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -101,7 +103,7 @@ static int rs_is(const char *rs, const char *what)
 }
 
 /* remoteproc holds the firmware powered: a "stop" applies */
-static int rs_powered(const char *rs)
+int supervisor_rs_powered(const char *rs)
 {
 	return rs_is(rs, "running") || rs_is(rs, "crashed") || rs_is(rs, "attached");
 }
@@ -133,24 +135,33 @@ static void recovery_over(struct recovery *r)
 }
 
 /* ms as seconds for a log line: "60 s", "0.25 s" */
-static const char *secs(char *buf, size_t n, uint64_t ms)
+const char *supervisor_secs(char *buf, size_t n, uint64_t ms)
 {
 	snprintf(buf, n, "%g s", (double)ms / 1000.0);
 	return buf;
 }
 
 /*
- * remoteproc's own recovery off, once its instance is known: servod stops
- * and starts the firmware itself. A recovery that fails in the kernel
- * leaves remoteproc "offline" with the firmware's power reference still
- * held: a "start" then does nothing and a "stop" is refused, so nothing
- * could retry it. With recovery disabled a crash report leaves the state
- * "crashed", which "stop" takes back to "offline".
+ * Once its instance is known: what the driver offers, said once in the log.
+ *
+ * report_crash (servoamp's Zynq-7000 driver): a stall is reported there,
+ * remoteproc's record of the crash ("crashed", its crash count, the
+ * coredump). The upstream xlnx_r5_remoteproc has none: nothing reports a
+ * crash to remoteproc, the stall is servod's own record (its log, the
+ * counters of `ampctl stats`), and the restart below is the same.
+ *
+ * remoteproc's own recovery off: servod stops and starts the firmware
+ * itself. A recovery that fails in the kernel leaves remoteproc "offline"
+ * with the firmware's power reference still held: a "start" then does
+ * nothing and a "stop" is refused, so nothing could retry it. With
+ * recovery disabled a crash report leaves the state "crashed", which
+ * "stop" takes back to "offline". The upstream R5 driver disables it at
+ * probe already (it reports no crash of its own either): read, not written.
  */
 static void own_recovery(struct servod *sd, const char *rs)
 {
 	struct recovery *r = &sd->recovery;
-	char path[600];
+	char path[600], cur[32];
 
 	if (rs_is(rs, "absent")) {
 		r->kernel_recovery_off = 0;	/* the instance may come back anew */
@@ -159,6 +170,21 @@ static void own_recovery(struct servod *sd, const char *rs)
 	if (r->kernel_recovery_off)
 		return;
 	r->kernel_recovery_off = 1;
+	sd->rproc.report_crash = rproc_has(&sd->rproc, "device/report_crash");
+	if (!sd->rproc.report_crash)
+		logm(sd, "%s: no device/report_crash (a driver without servoamp's crash report): a stall is "
+			 "servod's own record (log, `ampctl stats`), remoteproc is not told; servod restarts the "
+			 "firmware through state (stop, start)", sd->rproc.dir);
+	if (!rproc_has(&sd->rproc, "recovery")) {
+		logm(sd, "%s: no recovery attribute: remoteproc's own recovery left as the driver set it",
+		     sd->rproc.dir);
+		return;
+	}
+	if (!rproc_read_recovery(&sd->rproc, cur, sizeof(cur), path, sizeof(path)) && rs_is(cur, "disabled")) {
+		logm(sd, "remoteproc's own recovery is disabled (%s): servod restarts the firmware after a stall",
+		     path);
+		return;
+	}
 	if (rproc_write_recovery(&sd->rproc, "disabled", path, sizeof(path)))
 		logw(sd, "%s: %s: remoteproc's own recovery stays enabled (it restarts the firmware too)", path,
 		     strerror(errno));
@@ -166,77 +192,8 @@ static void own_recovery(struct servod *sd, const char *rs)
 		logm(sd, "remoteproc's own recovery disabled (%s): servod restarts the firmware after a stall", path);
 }
 
-/* Latched: the firmware stopped (again, after a stop that failed). */
-static void latched_stop(struct servod *sd, const char *rs)
-{
-	struct recovery *r = &sd->recovery;
-	char path[600];
-
-	if (!rs_powered(rs)) {
-		r->stop_pending = 0;
-		return;
-	}
-	if ((int64_t)(mono_now_ns() - r->stop_retry_ns) < 0)
-		return;
-	if (rproc_write_state(&sd->rproc, "stop", path, sizeof(path))) {
-		r->stop_retry_ns = mono_now_ns() + recovery_backoff_ns(&sd->opt.recovery, 1);
-		logw(sd, "fault latched: stopping the firmware: %s: %s (tried again in %llu ms)", path, strerror(errno),
-		     (unsigned long long)(recovery_backoff_ns(&sd->opt.recovery, 1) / 1000000u));
-		return;
-	}
-	r->stop_pending = 0;
-	logm(sd, "fault latched: firmware stopped");
-}
-
-/* One restart too many within the window: the session FAULT, the
- * firmware stopped, nothing exchanged until the operator's reset. */
-static void latch(struct servod *sd, const char *rs, const char *why)
-{
-	struct recovery *r = &sd->recovery;
-	const struct recovery_cfg *c = &sd->opt.recovery;
-	uint64_t now = mono_now_ns();
-	char w[32];
-
-	pthread_mutex_lock(&sd->lock);
-	session_event(&sd->session, SEV_LATCHED);
-	sd->stats.latches++;
-	pthread_mutex_unlock(&sd->lock);
-	r->phase = RESTART_NONE;
-	r->latched_ns = now;
-	snprintf(r->latched_why, sizeof(r->latched_why), "%s; %u restarts within %s (limit %u)", why,
-		 recovery_in_window(r, c, now), secs(w, sizeof(w), c->window_ms), c->limit);
-	logw(sd, "fault latched: %s: the firmware is stopped and the axes disabled until `ampctl fault reset`",
-	     r->latched_why);
-	r->stop_pending = 1;
-	r->stop_retry_ns = now;
-	r->foreign_logged = 0;
-	latched_stop(sd, rs);
-}
-
-/* Latched, every pass: the stop retried if it failed; a firmware someone
- * else started is not servod's (nothing exchanged) until the reset. */
-static void latched_pass(struct servod *sd, const char *rs)
-{
-	struct recovery *r = &sd->recovery;
-
-	atomic_store(&sd->session.stall_pending, 0);
-	if (r->stop_pending) {
-		latched_stop(sd, rs);
-		return;
-	}
-	if (!rs_powered(rs)) {
-		r->foreign_logged = 0;
-		return;
-	}
-	if (!r->foreign_logged) {
-		logw(sd, "fault latched: remoteproc says %s (started by someone else?): servod does not exchange "
-			 "with the servo until `ampctl fault reset`", rs);
-		r->foreign_logged = 1;
-	}
-}
-
 /* A restart's stop is next: which attach servod itself stops. */
-static void note_stop_phase(struct servod *sd)
+void supervisor_note_stop_phase(struct servod *sd)
 {
 	struct amp_peer_info pi = { 0 };
 
@@ -251,12 +208,12 @@ static int begin_restart(struct servod *sd, const char *rs, uint64_t now, const 
 	struct recovery *r = &sd->recovery;
 
 	if (!recovery_may_restart(r, &sd->opt.recovery, now)) {
-		latch(sd, rs, cause);
+		supervisor_latch(sd, rs, cause);
 		return 0;
 	}
 	recovery_note_restart(r, now);
 	r->restart++;
-	note_stop_phase(sd);
+	supervisor_note_stop_phase(sd);
 	r->phase_ns = now;
 	return 1;
 }
@@ -284,15 +241,15 @@ static void restart_failed(struct servod *sd, const char *rs, const char *fmt, .
 	snprintf(cause, sizeof(cause), "restart %u failed (%s)", r->restart, r->last_failure);
 	if (!recovery_may_restart(r, c, retry)) {
 		logw(sd, "recovery: %s", cause);
-		latch(sd, rs, cause);
+		supervisor_latch(sd, rs, cause);
 		return;
 	}
 	r->phase = RESTART_BACKOFF;
 	r->retry_ns = retry;
-	r->backoff_powered = rs_powered(rproc_state(&sd->rproc));
+	r->backoff_powered = supervisor_rs_powered(rproc_state(&sd->rproc));
 	logw(sd, "recovery: %s: retry in %s (%u of %u restarts within %s used)", cause,
-	     secs(b, sizeof(b), wait / 1000000u), recovery_in_window(r, c, now), c->limit,
-	     secs(w, sizeof(w), c->window_ms));
+	     supervisor_secs(b, sizeof(b), wait / 1000000u), recovery_in_window(r, c, now), c->limit,
+	     supervisor_secs(w, sizeof(w), c->window_ms));
 }
 
 /*
@@ -322,7 +279,8 @@ static int stopped_on_request(struct servod *sd, const char **rs, char *what, si
 
 /* The cycle thread saw the servo's heartbeat stand still, or its state
  * word say FAULT (or nothing sane) for wd_limit cycles: reported to
- * remoteproc (its record of the crash), then servod restarts the
+ * remoteproc (its record of the crash) where the driver has report_crash,
+ * then servod restarts the
  * firmware, which re-attaches; or, one restart too many, the latch. A
  * restarted servo that stalls before its parameter set is loaded is a
  * failed restart. */
@@ -358,14 +316,18 @@ static void report_stall(struct servod *sd, int why, const char *rs)
 	}
 	if (!recovery_may_restart(&sd->recovery, &sd->opt.recovery, now)) {
 		logw(sd, "%s: not restarted", cause);
-		latch(sd, rs, cause);
+		supervisor_latch(sd, rs, cause);
 		return;
 	}
-	logw(sd, "%s: reporting a crash to remoteproc", cause);
-	if (rproc_report_crash(&sd->rproc, path, sizeof(path)))
-		logm(sd, "%s: %s (servod restarts the firmware all the same)", path, strerror(errno));
-	else
-		sd->recovery.crash_wait = 1;
+	if (!sd->rproc.report_crash) {
+		logw(sd, "%s: restarting the firmware (servod's record: the driver has no report_crash)", cause);
+	} else {
+		logw(sd, "%s: reporting a crash to remoteproc", cause);
+		if (rproc_report_crash(&sd->rproc, path, sizeof(path)))
+			logw(sd, "%s: %s (servod restarts the firmware all the same)", path, strerror(errno));
+		else
+			sd->recovery.crash_wait = 1;
+	}
 	pthread_mutex_lock(&sd->lock);
 	session_event(&sd->session, SEV_CRASH_REPORTED);
 	sd->stats.recoveries++;
@@ -442,7 +404,7 @@ static void restart_step(struct servod *sd, const char *rs)
 		    now - r->phase_ns < (uint64_t)CRASH_WAIT_MS * 1000000u)
 			return;
 		r->crash_wait = 0;
-		if (rs_powered(rs)) {
+		if (supervisor_rs_powered(rs)) {
 			if (rproc_write_state(&sd->rproc, "stop", path, sizeof(path))) {
 				restart_failed(sd, rs, "stop: %s: %s", path, strerror(errno));
 			} else {
@@ -454,7 +416,7 @@ static void restart_step(struct servod *sd, const char *rs)
 		if (!rs_is(rs, "offline")) {
 			if (now - r->phase_ns > timeout)
 				restart_failed(sd, rs, "remoteproc %s, not stopped within %s", rs,
-					       secs(t, sizeof(t), c->timeout_ms));
+					       supervisor_secs(t, sizeof(t), c->timeout_ms));
 			return;
 		}
 		r->phase = RESTART_START;	/* offline already: the start in this pass */
@@ -480,7 +442,7 @@ static void restart_step(struct servod *sd, const char *rs)
 			restart_failed(sd, rs, "remoteproc %s after the start", rs);
 		else if (now - r->phase_ns > timeout)
 			restart_failed(sd, rs, "started, but not attached within %s",
-				       secs(t, sizeof(t), c->timeout_ms));
+				       supervisor_secs(t, sizeof(t), c->timeout_ms));
 		return;
 	}
 }
@@ -531,7 +493,7 @@ void supervise(struct servod *sd)
 
 	own_recovery(sd, rs);
 	if (session_latched(ss)) {
-		latched_pass(sd, rs);
+		supervisor_latched_pass(sd, rs);
 		return;
 	}
 	if (!session_open(ss)) {
@@ -583,73 +545,3 @@ void servod_pass(struct servod *sd, int *busy)
 	control_serve(sd, *busy ? 0 : 20);
 	*busy = telemetry_serve(sd);
 }
-
-void supervisor_format(struct servod *sd, struct out *o)
-{
-	const struct recovery *r = &sd->recovery;
-	const struct recovery_cfg *c = &sd->opt.recovery;
-	uint64_t now = mono_now_ns();
-
-	put(o, "recovery=%s restart=%u restarts_in_window=%u restart_limit=%u window_s=%g failed_in_a_row=%u",
-	    recovery_phase_name(r->phase), r->restart, recovery_in_window(r, c, now), c->limit,
-	    (double)c->window_ms / 1000.0, r->failed);
-	if (r->phase == RESTART_BACKOFF)
-		put(o, " next_restart_in_ms=%llu",
-		    (unsigned long long)((int64_t)(r->retry_ns - now) > 0 ? (r->retry_ns - now) / 1000000u : 0u));
-	put(o, "\n");
-	if (r->last_failure[0])
-		put(o, "last_restart_failure=%s\n", r->last_failure);
-	if (session_latched(&sd->session))
-		put(o, "latched=1 latched_for_s=%.1f firmware_stopped=%d\nlatched_why=%s\n",
-		    (double)(now - r->latched_ns) / 1e9, !r->stop_pending, r->latched_why);
-	else
-		put(o, "latched=0\n");
-}
-
-/*
- * "fault": the recovery lines of `ampctl status`. "fault reset": the
- * operator's reset of a latched fault (a drive's fault reset, systemd's
- * reset-failed): the restart history forgotten, the firmware started again
- * (stopped first if someone started it meanwhile); the session RECOVERING
- * until it attaches and has its parameter set ("recovery complete").
- * Without a latched fault it only forgets the history of restarts.
- */
-static int req_fault(struct servod *sd, struct out *o, int argc, char **argv, char *msg, size_t n)
-{
-	struct recovery *r = &sd->recovery;
-	char why[sizeof(r->latched_why)];
-	double ago;
-
-	if (argc == 1) {
-		supervisor_format(sd, o);
-		return SE_OK;
-	}
-	if (argc != 2 || strcmp(argv[1], "reset")) {
-		snprintf(msg, n, "usage: fault [reset]");
-		return SE_USAGE;
-	}
-	if (!session_latched(&sd->session)) {
-		if (r->phase == RESTART_NONE) {
-			recovery_clear(r);
-			put(o, "fault: none latched; the history of restarts is cleared\n");
-		} else {
-			put(o, "fault: none latched; a recovery is running (restart %u, %s)\n", r->restart,
-			    recovery_phase_name(r->phase));
-		}
-		return SE_OK;
-	}
-	snprintf(why, sizeof(why), "%s", r->latched_why);
-	ago = (double)(mono_now_ns() - r->latched_ns) / 1e9;
-	recovery_clear(r);
-	r->by_reset = 1;
-	r->restart = 1;
-	note_stop_phase(sd);
-	r->phase_ns = mono_now_ns();
-	pthread_mutex_lock(&sd->lock);
-	session_event(&sd->session, SEV_RESET);
-	pthread_mutex_unlock(&sd->lock);
-	logm(sd, "fault reset by the operator (latched %.1f s ago: %s): restarting the servo", ago, why);
-	put(o, "fault reset: restarting the servo (recovering=1 in `ampctl status` until it is back)\n");
-	return SE_OK;
-}
-SERVOD_REQUEST("fault", req_fault);

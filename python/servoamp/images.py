@@ -54,7 +54,7 @@ KERNELS = ("rt", "vanilla")
 
 def default_kernel() -> str:
     """The kernel variant the board boots: ``rt`` (PREEMPT_RT, the
-    default: issue 23's latency table, docs/cycle.md) or ``vanilla`` (the
+    default: issue 23's latency table, docs/cycle-rt.md) or ``vanilla`` (the
     non-preemptible 6.1), from $SERVOAMP_KERNEL (``west emu --kernel`` sets
     it); linux/kernel/build.sh --variant builds either."""
     kernel = os.environ.get("SERVOAMP_KERNEL") or "rt"

@@ -2,7 +2,7 @@
 percentiles, the cyclictest parser, the table and the figures on synthetic
 windows, the committed bench/results/rt_latency.json against its own
 windows, and mypy --strict. No QEMU run and no figure asserted (the run
-itself: bench/README.md, docs/cycle.md section 7)."""
+itself: bench/README.md, docs/cycle-figures.md, "Figures")."""
 
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ Documentation     The cycle end to end on the emulated board, in ONE boot:
 ...               the servo. On virtual time (-icount, the default) no cycle
 ...               may be missed on either side and both sides count the same
 ...               cycles; on the host clock (SERVOAMP_CLOCK=host) misses are
-...               counted and reported (docs/cycle.md, section 6).
+...               counted and reported (docs/cycle-figures.md, "Emulation limits").
 Resource          resources/servoamp.resource
 Resource          resources/servod.resource
 Suite Setup       Boot Cycle Board
@@ -106,7 +106,7 @@ Cycle Interrupt On Its Own Driver, Its Thread Above servod's
     ...    (linux/uio/servoamp_cycle_uio.c), not uio_pdrv_genirq, and its
     ...    interrupt thread runs at SCHED_FIFO 81 above servod's cycle
     ...    thread (FIFO 80), the only other real-time thread servod has
-    ...    (docs/cycle.md, "Priorities under PREEMPT_RT"). On the vanilla
+    ...    (docs/cycle-rt.md). On the vanilla
     ...    kernel the thread exists too (it never runs there).
     ${uio}=    Execute Shell Command    for d in /sys/class/uio/uio*; do echo "$(cat $d/name): $(cat $d/version)"; done
     Should Contain    ${uio}    cycle-interrupt: servoamp-cycle-uio 1
@@ -179,7 +179,7 @@ Ten Thousand Cycles At 1 kHz
     Log    1 kHz: ${r}[linux.cycles] Linux cycles, ${r}[servo.cycles] servo cycles, missed linux ${r}[linux.missed_irq] servo ${r}[servo.missed] (${rate} %), exchanges ${r}[linux.exchanges]    console=True
     # the rate is reported, not judged: on the host clock it depends on the
     # host's load (1-10 % idle, 21 % with a busy process per host core;
-    # docs/cycle.md, section 7); the accounting is checked by Exchange Window
+    # docs/cycle-figures.md, "Figures"); the accounting is checked by Exchange Window
 
 A Shorter Run At 250 Microseconds
     [Teardown]    Ampctl    param set cycle_period_us 1000

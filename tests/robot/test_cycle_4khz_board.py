@@ -18,7 +18,7 @@ counter of the guest (servod's and the firmware's), never host time:
   (never missed).
 
 The benchmark measures the same run with its figures (bench/cycle/
-cycle_bench.py, "the long run"; docs/cycle.md section 7)."""
+cycle_bench.py, "the long run"; docs/cycle-figures.md, "Figures")."""
 
 from __future__ import annotations
 

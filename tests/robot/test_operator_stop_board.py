@@ -18,7 +18,7 @@ state word first, and servod asks remoteproc again before any report
 (docs/cycle.md, "An operator's stop"). Times are guest times (virtual
 under -icount); the rounds run in batches, one shell command each, so that
 the console round trips stay few. The same logic on the host, with both
-kinds of stop and a stop during a recovery: tests/servod/test_servod_recovery.c."""
+kinds of stop and a stop during a recovery: tests/servod/test_servod_recovery_stop.c."""
 
 from __future__ import annotations
 

@@ -23,7 +23,8 @@ def _servod_sources() -> list[Path]:
     return [SERVOD / n for n in names if n != "main.c"]
 
 
-def _build_and_run(tmp_path: Path, source: str, name: str, link: tuple[str, ...] = ()) -> str:
+def _build_and_run(tmp_path: Path, source: str, name: str, link: tuple[str, ...] = (),
+                   extra: tuple[str, ...] = ()) -> str:
     motion_build = TOP / "build" / "motion"
     subprocess.run(["make", "-s", "-C", str(TOP / "motion"), "host", f"BUILD={motion_build}"],
                    check=True)
@@ -33,7 +34,7 @@ def _build_and_run(tmp_path: Path, source: str, name: str, link: tuple[str, ...]
            f"-I{TOP / 'amp_lib/include'}", f"-I{TOP / 'amp_lib/port/linux'}", f"-I{TOP / 'include'}",
            f"-I{TOP / 'linux/telemetry'}", f"-I{TOP / 'motion/include'}", f"-I{SERVOD}",
            f"-I{TOP / 'tests/amp_lib'}",
-           str(Path(__file__).with_name(source)),
+           str(Path(__file__).with_name(source)), *(str(Path(__file__).with_name(e)) for e in extra),
            *map(str, _servod_sources()),
            str(TOP / "amp_lib/src/amp_linux.c"), str(TOP / "amp_lib/src/amp_common.c"),
            str(TOP / "amp_lib/src/amp_servo.c"),
@@ -64,4 +65,16 @@ def test_servod_recovery(tmp_path: Path) -> None:
     stall is reported (the cycle's telemetry hook wrapped by the linker to
     attach it there)."""
     _build_and_run(tmp_path, "test_servod_recovery.c", "servod recovery",
-                   link=("-Wl,--wrap=telemetry_cycle",))
+                   link=("-Wl,--wrap=telemetry_cycle",), extra=("recovery_rig.c",))
+
+
+def test_servod_recovery_stop(tmp_path: Path) -> None:
+    """Issue 33, item 1 and issue 35, item 3, on the same rig
+    (recovery_rig.c): an operator's stop through remoteproc is never a
+    crash (with and without the firmware's STOPPING word, between two
+    passes, during a recovery); a remoteproc without report_crash (the
+    ZynqMP's upstream R5 driver): the restart, the parameter restore, the
+    latch and the fault reset through state alone, said once in servod's
+    log instead of an error at each stall (test_servod_recovery_stop.c)."""
+    _build_and_run(tmp_path, "test_servod_recovery_stop.c", "servod recovery (stop)",
+                   link=("-Wl,--wrap=telemetry_cycle",), extra=("recovery_rig.c",))

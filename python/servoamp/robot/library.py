@@ -81,7 +81,7 @@ class EmulatedBoard:
     def emulation_clock(self) -> str:
         """``virtual`` (-icount: guest time counts instructions) or ``host``
         (guest time follows the host clock): $SERVOAMP_CLOCK, default
-        virtual (docs/cycle.md, section 6)."""
+        virtual (docs/cycle-figures.md, "Emulation limits")."""
         return default_clock()
 
     @keyword

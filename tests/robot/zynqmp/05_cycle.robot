@@ -113,7 +113,12 @@ An Operator's Stop Is Final, A Start Attaches Again
     ${st}=    Status
     Should Be Equal    ${st}[remoteproc]    offline
     Should Be Equal    ${st}[recoveries]    0
-    ${crash}=    Servod Log Count    crash
+    # no stall taken for a crash: this driver has no report_crash, so a
+    # stall would be logged as servod's own record ("... restarting the
+    # firmware (servod's record ...)"), never "reporting a crash"
+    ${stall}=    Servod Log Count    restarting the firmware
+    Should Be Equal As Integers    ${stall}    0
+    ${crash}=    Servod Log Count    reporting a crash
     Should Be Equal As Integers    ${crash}    0
     Start Firmware Without Status Block    ${FW}
     Wait For Servod Log    parameter set loaded    2
