@@ -305,7 +305,8 @@ def run_kernel(board: qemu.Board, kernel: str, images: qemu.Images, cycles: int,
         sh(f"servoamp-net {GUEST_ADDR}/24", 60)
         out["rt_tests"] = sh("cyclictest --help 2>&1 | head -1; hackbench --help 2>&1 | head -1; true")
         sh(f"umask 077; echo {token} > {TOKEN_FILE}")
-        sh(f"(servod {servod_board_args(board)} --telemetry {GUEST_ADDR}:{TELEMETRY_PORT} --telemetry-token {TOKEN_FILE} "
+        sh(f"(servod {servod_board_args(board)} --telemetry {GUEST_ADDR}:{TELEMETRY_PORT} "
+           f"--telemetry-token {TOKEN_FILE} "
            "> /tmp/servod.log 2>&1 &)")
         sh("while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done")
         sh("echo rpu_app.elf > /sys/class/remoteproc/remoteproc0/firmware; "

@@ -124,7 +124,8 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           "PREEMPT_RT; zynqmp_qemu: PREEMPT_RT) at 1 and 4 kHz, idle and under hackbench, a CPU hog, bulk TCP "
           "and a recovery (virtual time)",
           True, "at 10,000 cycles per window: about 20 min on zynq7000_qemu (two kernel boots, 20 windows; "
-                "100,000: about 4.7 h of one core, --jobs 2 --resume), about 23 min on zynqmp_qemu (one boot, 10 windows; measured with load average 10-12)",
+                "100,000: about 4.7 h of one core, --jobs 2 --resume), about 23 min on zynqmp_qemu (one boot, "
+                "10 windows; measured with a load average of 10-12)",
           (),
           ("{python}", "bench/cycle/rt_latency_bench.py", "--board", "{board}", "--json", "{json}"),
           ("--cycles", "500", "--loads", "idle,cpu"),
