@@ -20,7 +20,12 @@ A python-can logger (``python -m can.logger -i servoamp``, a passive
 client) records the bus meanwhile: its timestamps (each frame's end on the
 modelled bus) must never go back (item 5: before the fix a guest frame
 reached passive clients at once and an answer only at its bus time, so
-frames went back by up to milliseconds in its file).
+frames went back by up to milliseconds in its file). So does the bridge
+(``servoamp bridge --no-telemetry --can 0=SOCKET --mcap``, another passive
+client: no servod here, so its CAN frames are logged on the emulator's
+virtual time): the MCAP, read back with servoamp.mcapio, must hold on
+/servoamp/can0 every frame the logger holds, each with its bus time as log
+time, and no log time may go back.
 
 The tests share that setup:
 
@@ -40,10 +45,11 @@ The tests share that setup:
 Pass, for both: the simulator is connected to the end (QEMU logs no
 disconnect), the master still sees all four drives answer its SYNCs after
 the last pause, when QEMU quits the simulator exits 0 without a
-traceback, the logger's file is in time order, and QEMU's RSS grows by no
-more than docs/canlink.md bounds a passive client's backlog (``max-backlog``
-* 32 bytes, 2 MiB by default) times the passive clients (the master and
-the logger; ``SERVOAMP_SOAK_RSS_BOUND`` in bytes overrides it), measured
+traceback, the logger's file and the bridge's MCAP are in time order, and
+QEMU's RSS grows by no more than docs/canlink.md bounds a passive client's
+backlog (``max-backlog`` * 32 bytes, 2 MiB by default) times the passive
+clients (the master, the logger and the bridge;
+``SERVOAMP_SOAK_RSS_BOUND`` in bytes overrides it), measured
 from /proc/<pid>/status before the master connects, before each pause and
 at the end; the figures are printed. The soak also wants an answer, with
 the right value, to every SDO read the master made after the last pause.
@@ -67,7 +73,8 @@ import pytest
 
 from fieldbus_helpers import nmt, sdo_response, sdo_upload
 from fieldbus_qemu import Board, GuestFrame, qemu_binary
-from servoamp import canlink
+from servoamp import canlink, mcapio
+from servoamp.schemas import servoamp_pb2 as pb
 
 pytestmark = pytest.mark.board
 
@@ -77,7 +84,7 @@ NODES = (1, 2, 3, 4)
 # docs/canlink.md, "Silence and death": a passive client's backlog takes at
 # most max-backlog (default 65536) * 32 bytes of QEMU's memory
 BACKLOG_BOUND = 65536 * 32
-PASSIVE_CLIENTS = 2                       # the master and can.logger
+PASSIVE_CLIENTS = 3                       # the master, can.logger and the bridge
 RSS_BOUND = int(os.environ.get("SERVOAMP_SOAK_RSS_BOUND", PASSIVE_CLIENTS * BACKLOG_BOUND))
 # what the master reads by SDO, and what a drive answers (its EDS)
 SDO_OBJECTS = {0x1000: 0x00020192, 0x6041: None}   # device type; statusword (any value)
@@ -223,22 +230,33 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
     for the test's own checks."""
     board = Board(qemu_binary(), tmp_path, timeout_ms=2000)
     err = tmp_path / "drivesim.err"
-    drivesim = subprocess.Popen(
-        [sys.executable, "-m", "servoamp.drivesim", "--socket", str(board.can_sock),
-         "--nodes", ",".join(map(str, NODES)), "-v"],
-        stderr=open(err, "w"), text=True, cwd=REPO,
-        env={**os.environ, "PYTHONPATH": str(REPO / "python")})
     master = None
     run = None
     asc = tmp_path / "bus.asc"
+    drivesim: subprocess.Popen[str] | None = None
     logger = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "servoamp", "-c", str(board.can_sock),
                                "-f", str(asc)], stdout=subprocess.PIPE, stderr=open(tmp_path / "logger.err", "w"),
                               text=True, cwd=REPO,
                               env={**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONPATH": str(REPO / "python")})
+    mcap = tmp_path / "bus.mcap"
+    bridge = subprocess.Popen([sys.executable, "-m", "servoamp.cli", "bridge", "--no-telemetry", "--no-server",
+                               "--can", f"0={board.can_sock}", "--mcap", str(mcap), "--json"],
+                              stdout=subprocess.PIPE, stderr=open(tmp_path / "bridge.err", "w"), text=True,
+                              cwd=REPO, env={**os.environ, "PYTHONUNBUFFERED": "1",
+                                             "PYTHONPATH": str(REPO / "python")})
     try:
-        assert logger.stdout is not None
+        assert logger.stdout is not None and bridge.stdout is not None
         line = logger.stdout.readline()        # "Connected to ServoampBus: ..." once HELLO came back
         assert "Connected to" in line, line
+        line = bridge.stdout.readline()        # "recording to ...": its canlink HELLO came back
+        assert "recording to" in line, (line, (tmp_path / "bridge.err").read_text())
+        # the simulator once both recorders are on the bus: they get every
+        # frame from its drives' boot-up on
+        drivesim = subprocess.Popen(
+            [sys.executable, "-m", "servoamp.drivesim", "--socket", str(board.can_sock),
+             "--nodes", ",".join(map(str, NODES)), "-v"],
+            stderr=open(err, "w"), text=True, cwd=REPO,
+            env={**os.environ, "PYTHONPATH": str(REPO / "python")})
         board.can_init()
         deadline = time.monotonic() + 120
         while "connected:" not in err.read_text():
@@ -303,11 +321,13 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
             master.close()
         rc = board.close()
         log = (tmp_path / "qemu.log").read_text()
-        try:
-            drc = drivesim.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            drivesim.kill()
-            drc = drivesim.wait()
+        drc = None
+        if drivesim is not None:
+            try:
+                drc = drivesim.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                drivesim.kill()
+                drc = drivesim.wait()
         if master is not None:
             master.link.close()
         try:
@@ -315,6 +335,13 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
         except subprocess.TimeoutExpired:
             logger.send_signal(signal.SIGINT)
             logger.wait(timeout=10)
+        # the bridge runs until told to stop (its reader ended at QEMU's BYE)
+        bridge.send_signal(signal.SIGINT)
+        try:
+            bout, _ = bridge.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            bridge.kill()
+            bout, _ = bridge.communicate()
     assert "disconnected" not in log, log
     assert rc == 0, log
     assert drc == 0 and "Traceback" not in err.read_text(), tail(err)
@@ -327,6 +354,10 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
     assert len(stamps) > 1000, len(stamps)
     back = [(i, a, b) for i, (a, b) in enumerate(zip(stamps, stamps[1:])) if b < a]
     assert not back, f"{len(back)} of {len(stamps)} frames go back in time, first {back[:3]}"
+    berr = (tmp_path / "bridge.err").read_text()
+    assert bridge.returncode == 0 and "Traceback" not in berr, (bridge.returncode, berr, bout)
+    times = check_mcap_can_times(mcap)
+    assert len(times) == len(stamps), f"the bridge's MCAP holds {len(times)} frames, the logger {len(stamps)}"
     growth = max(run.rss) - run.rss[0]
     drops = [line.rsplit("(", 1)[-1].rstrip(")") for line in log.splitlines() if "a frame dropped" in line]
     print(f"QEMU's VmRSS: {run.rss[0] / 2**20:.1f} MiB before the master, {max(run.rss) / 2**20:.1f} MiB at most "
@@ -335,6 +366,28 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
           + (f"; frames dropped by QEMU: {drops[-1]}" if drops else ""))
     assert growth <= RSS_BOUND, f"QEMU's RSS grew by {growth} bytes, over {RSS_BOUND}: {run.rss}"
     return run
+
+
+def check_mcap_can_times(path: Path) -> list[int]:
+    """The log times of every CAN channel in the bridge's MCAP (servoamp's
+    MCAP reader, through the file's index: it must be complete), each
+    channel's never going back; on the virtual clock (no servod) a frame's
+    log time is its bus time. /servoamp/can0's log times."""
+    res = mcapio.ReadResult(False, "")
+    times: dict[str, list[int]] = {}
+    for topic, t, data in mcapio.iter_messages(path, result=res):
+        if topic.startswith("/servoamp/can"):
+            assert t == pb.CanFrame.FromString(data).t_bus_ns, (topic, t)
+            times.setdefault(topic, []).append(t)
+    assert res.complete, res.error
+    assert set(times) == {"/servoamp/can0"}, sorted(times)
+    for topic, ts in times.items():
+        back = [(i, a, b) for i, (a, b) in enumerate(zip(ts, ts[1:])) if b < a]
+        assert not back, f"{topic}: {len(back)} of {len(ts)} log times go back, first {back[:3]}"
+    meta = {m.name: m.metadata for m in mcapio.read_metadata(path)}
+    rec = meta["servoamp.recording"]
+    assert (rec["can_pending_lost"], rec["can_errors"]) == ("0", "{}"), rec
+    return times["/servoamp/can0"]
 
 
 def test_host_pauses_do_not_drop_the_drive_simulator(tmp_path: Path) -> None:
