@@ -57,6 +57,7 @@ the right value, to every SDO read the master made after the last pause.
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import signal
@@ -222,6 +223,7 @@ class Run:
     t_last_pause: float                   # host time the last pause ended
     rss: list[int] = field(default_factory=list)   # before the master, before each pause, at the end
     guest_frames: int = 0
+    t_end: float = 0.0                    # host time the guest stopped
 
 
 def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
@@ -311,6 +313,7 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
             elif master.stop.is_set() and not master.pending():
                 t_end = min(t_end, time.monotonic() + 0.2)
             assert drivesim.poll() is None, f"the drive simulator exited after {done} pauses:\n{tail(err)}"
+        run.t_end = time.monotonic()
         run.rss.append(vm_rss(board.proc.pid))
         after = {n for t, n in master.tpdos if t > run.t_last_pause + 0.1}
         assert master.error is None, master.error
@@ -358,6 +361,8 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
     assert bridge.returncode == 0 and "Traceback" not in berr, (bridge.returncode, berr, bout)
     times = check_mcap_can_times(mcap)
     assert len(times) == len(stamps), f"the bridge's MCAP holds {len(times)} frames, the logger {len(stamps)}"
+    bres = json.loads(bout.strip().splitlines()[-1])
+    print(f"the bridge: {len(times)} frames in its MCAP, {bres['cpu_s']:.1f} s CPU in {bres['wall_s']:.1f} s")
     growth = max(run.rss) - run.rss[0]
     drops = [line.rsplit("(", 1)[-1].rstrip(")") for line in log.splitlines() if "a frame dropped" in line]
     print(f"QEMU's VmRSS: {run.rss[0] / 2**20:.1f} MiB before the master, {max(run.rss) / 2**20:.1f} MiB at most "
@@ -421,7 +426,7 @@ def soak(tmp_path: Path, longest_s: float) -> None:
     assert not wrong, f"{len(wrong)} wrong answers, first {wrong[:3]}"
     assert len(late) > 100, len(late)
     assert not unanswered, f"{len(unanswered)} of {len(late)} SDO reads after the last pause unanswered: " \
-                           f"{unanswered[:5]}"
+                           f"{unanswered[:5]}; the master stopped at {run.master.t_stop}, the guest at {run.t_end}"
 
 
 @pytest.mark.parametrize("longest_ms", [200, 500])
