@@ -487,7 +487,8 @@ class Bridge(ServodParams):
             ) -> RecordResult:
         """Stream until duration (s, wall clock) elapses, stop is set, or
         (reconnect=False) the stream ends. Reconnects like ``servoamp record``.
-        Without telemetry: until duration or stop."""
+        Without telemetry: until duration, stop, or every CAN bus ended
+        (QEMU's BYE)."""
         stop = stop or threading.Event()
         res = self.res
         t0 = time.monotonic()
@@ -504,7 +505,11 @@ class Bridge(ServodParams):
                     res.stopped_by = "duration"
                     break
                 if not self.telemetry:
-                    # CAN frames only: their readers log; the recording is flushed here
+                    # CAN frames only: their readers log; the recording is
+                    # flushed here; the end when every bus is gone (QEMU quit)
+                    if self.can is not None and self.can.ended:
+                        res.stopped_by = "eof"
+                        break
                     stop.wait(self.flush_interval if deadline is None
                               else min(self.flush_interval, max(0.0, deadline - now)))
                     continue

@@ -81,6 +81,11 @@ class CanTap:
             th.start()
 
     @property
+    def ended(self) -> bool:
+        """Every bus's reader has ended (QEMU's BYE, or the link failed)."""
+        return not any(th.is_alive() for th in self._threads)
+
+    @property
     def wants_cycles(self) -> bool:
         """The cycle records' side of the clock is not known yet."""
         return self.clock.gt_minus_mono_ns is None

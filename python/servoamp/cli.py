@@ -213,7 +213,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="servod's telemetry (required unless --no-telemetry)")
     p.add_argument("--no-telemetry", action="store_true",
                    help="no servod (a machine without Linux): carry only the --can buses, "
-                        "their frames logged on the emulator's virtual time")
+                        "their frames logged on the emulator's virtual time; ends when QEMU "
+                        "has closed every bus")
     p.add_argument("--listen", type=_hostport, default=("127.0.0.1", 8765), metavar="HOST:PORT",
                    help="the Foxglove WebSocket server's address (default 127.0.0.1:8765; "
                         "port 0: any free port)")

@@ -357,13 +357,12 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
         except subprocess.TimeoutExpired:
             logger.send_signal(signal.SIGINT)
             logger.wait(timeout=10)
-        # the bridge runs until told to stop (its reader ended at QEMU's BYE)
-        bridge.send_signal(signal.SIGINT)
+        # without telemetry the bridge ends by itself once it read QEMU's BYE
         try:
-            bout, _ = bridge.communicate(timeout=30)
+            bout, _ = bridge.communicate(timeout=60)
         except subprocess.TimeoutExpired:
-            bridge.kill()
-            bout, _ = bridge.communicate()
+            bridge.send_signal(signal.SIGINT)
+            bout, _ = bridge.communicate(timeout=30)
     assert "disconnected" not in log, log
     assert rc == 0, log
     assert drc == 0 and "Traceback" not in err.read_text(), tail(err)
@@ -378,6 +377,7 @@ def hiccups(tmp_path: Path, pauses: Sequence[float], sdo: bool) -> Run:
     assert not back, f"{len(back)} of {len(stamps)} frames go back in time, first {back[:3]}"
     berr = (tmp_path / "bridge.err").read_text()
     assert bridge.returncode == 0 and "Traceback" not in berr, (bridge.returncode, berr, bout)
+    assert json.loads(bout.strip().splitlines()[-1])["stopped_by"] == "eof", bout
     times = check_mcap_can_times(mcap)
     assert len(times) == len(stamps), f"the bridge's MCAP holds {len(times)} frames, the logger {len(stamps)}"
     bres = json.loads(bout.strip().splitlines()[-1])
@@ -447,7 +447,10 @@ def soak(tmp_path: Path, longest_s: float) -> None:
           f"{max(run.stalls, default=0) * 1000:.0f} ms), the last {run.t_last_stall - run.t_last_pause:+.2f} s "
           "from the last pause")
     assert not wrong, f"{len(wrong)} wrong answers, first {wrong[:3]}"
-    assert len(late) > 100, len(late)
+    assert len(late) > 100, (f"{len(late)} SDO reads once the last burst drained: the host stalled the "
+                             f"simulator {len(run.stalls)} times over {STALL_S * 1000:.0f} ms, the last "
+                             f"{run.t_last_stall - run.t_last_pause:+.2f} s from the last pause (a run goes on "
+                             f"for at most {STALL_EXTEND_MAX_S} s after it): too loaded to tell")
     assert not unanswered, f"{len(unanswered)} of {len(late)} SDO reads after the last pause or stall unanswered: " \
                            f"{unanswered[:5]}; the master stopped at {run.master.t_stop}, the guest at {run.t_end}"
 
