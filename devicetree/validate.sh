@@ -4,16 +4,18 @@
 #   devicetree/validate.sh [board]      # default board: zynq7000_qemu
 #
 # 1. dt-doc-validate: the servoamp bindings (devicetree/bindings/**.yaml).
-# 2. dt-mk-schema: the kernel source's bindings (linux-source-6.1) plus ours,
-#    cached in build/dt/ by kernel source + bindings. "servoamp" is not a
-#    registered vendor prefix of Linux 6.1, so the kernel bindings are
+# 2. dt-mk-schema: the board's kernel source's bindings (linux-source-6.1
+#    for the Zynq-7000, 6.12 for the ZynqMP: board.yaml's linux.link) plus
+#    ours, cached in build/dt/ by kernel source + bindings. "servoamp" is
+#    not a registered vendor prefix of Linux, so the kernel bindings are
 #    staged (symlinks) with a vendor-prefixes.yaml that adds it, as the
 #    upstream patch adding the prefix would.
 # 3. dt-validate: the board's Linux DTB (build/boards/<board>/linux.dtb,
 #    built by python/servoamp/qemu.py) against them.
 # Messages about servoamp's nodes fail the script. Messages about the
-# upstream zynq-7000.dtsi nodes (Linux 6.1 bindings vs. this dtschema
-# release) and the board's own root compatible are printed as known.
+# upstream SoC nodes (the kernel's bindings vs. this dtschema release) and
+# the board's own root compatible are printed as known.
+# tests/robot/test_devicetree_validate.py runs it on every board.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 repo=$(cd "$here/.." && pwd)
@@ -22,9 +24,14 @@ venv=$repo/.venv/bin
 out=$repo/build/dt
 mkdir -p "$out"
 
-# the kernel's source (dt-bindings headers): that of any variant built
+# the kernel's source (bindings, dt-bindings headers): the board's own
+# kernel build when board.yaml names one (linux.link, e.g. the ZynqMP's
+# 6.12), else that of any variant of the default kernel built (6.1)
 ksrc=""
-for k in kernel-rt kernel; do
+link=$(sed -n 's/^  link: *\([^ #]*\).*/\1/p' "$repo/boards/$board/board.yaml" 2>/dev/null || true)
+kernels=(kernel-rt kernel)
+[ -z "$link" ] || kernels=("${link#build/}")
+for k in "${kernels[@]}"; do
 	[ -n "$ksrc" ] || ksrc=$(sed -n 's/^src=//p' "$repo/build/$k/info" 2>/dev/null || true)
 done
 [ -d "$ksrc" ] || { echo "validate: no kernel source; run linux/kernel/build.sh" >&2; exit 1; }

@@ -348,12 +348,30 @@ def parse_range(s: str) -> list[int]:
     return out
 
 
-def figures(points: list[dict[str, Any]], rates: list[int]) -> list[dict[str, Any]]:
+def sync_jitter(p: dict[str, Any]) -> tuple[float, str] | None:
+    """A point's SYNC jitter (us: the farthest SYNC-to-SYNC spacing from the
+    period) and its range, if measured."""
+    g = p.get("bus", {}).get("sync_gap_ns")
+    if g is None:
+        return None
+    per = p["period_us"] * 1000
+    return (round(max(per - g["min"], g["max"] - per) / 1000, 1),
+            f"{g['min'] / 1000:.1f}..{g['max'] / 1000:.1f} us")
+
+
+def tag_of(p: dict[str, Any]) -> str:
+    return f"{p['drives']}drives_{p['rate_hz'] // 1000}khz"
+
+
+def figures(points: list[dict[str, Any]], rates: list[int],
+            baseline: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+    """The figures; with ``baseline`` (another QEMU measured in the same
+    run), each SYNC jitter's note gives its figure there too."""
     f: list[dict[str, Any]] = []
     for p in points:
         if p.get("refused"):
             continue
-        tag = f"{p['drives']}drives_{p['rate_hz'] // 1000}khz"
+        tag = tag_of(p)
         bus = p["bus"]
         if "bits_mean" in bus:
             f.append({"name": f"load_pct_{tag}", "value": bus["load_mean_pct"], "unit": "%", "better": "lower",
@@ -363,13 +381,14 @@ def figures(points: list[dict[str, Any]], rates: list[int]) -> list[dict[str, An
             f.append({"name": f"load_max_pct_{tag}", "value": bus["load_max_pct"], "unit": "%", "better": "lower",
                       "note": f"the busiest cycle of {bus['cycles']}: {bus['bits_max']} bits (the drives' heartbeats "
                               "in one cycle)"})
-        if "sync_gap_ns" in bus:
-            g = bus["sync_gap_ns"]
-            per = p["period_us"] * 1000
-            f.append({"name": f"sync_jitter_us_{tag}", "unit": "us", "better": "lower",
-                      "value": round(max(per - g["min"], g["max"] - per) / 1000, 1),
-                      "note": f"SYNC to SYNC on the bus {g['min'] / 1000:.1f}..{g['max'] / 1000:.1f} us "
-                              "(the end of the SYNC frame, guest time)"})
+        jit = sync_jitter(p)
+        if jit is not None:
+            note = f"SYNC to SYNC on the bus {jit[1]} (the end of the SYNC frame, guest time)"
+            before = baseline["sync_jitter"].get(tag) if baseline is not None else None
+            if baseline is not None and before is not None:
+                note += f"; {before[0]} us ({before[1]}) with {baseline['label']}, in the same run"
+            f.append({"name": f"sync_jitter_us_{tag}", "unit": "us", "better": "lower", "value": jit[0],
+                      "note": note})
         f.append({"name": f"sync_missed_{tag}", "value": p["stats"]["sync_missed"], "unit": "cycles",
                   "better": "lower", "note": f"of {p['stats']['sync']} SYNCs; pdo_missing {p['stats']['pdo_missing']}"})
     for r in rates:
@@ -386,32 +405,12 @@ def figures(points: list[dict[str, Any]], rates: list[int]) -> list[dict[str, An
     return f
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cycles", type=int, default=2000, help="window per point, cycles (a multiple of 1000)")
-    ap.add_argument("--rates", default="1000,2000,4000", help="cycle rates, Hz")
-    ap.add_argument("--drives", default="1-5", help="drives per bus to try")
-    ap.add_argument("--quick", action="store_true", help="1 kHz, 1-2 drives, 1000 cycles (a smoke run)")
-    ap.add_argument("--json", type=Path)
-    ap.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench" / "fieldbus")
-    ap.add_argument("-j", "--jobs", type=int, default=2)
-    ap.add_argument("--tap", type=Path, help=argparse.SUPPRESS)  # internal: the bus client (--json: its file)
-    args = ap.parse_args(argv)
-    if args.tap:
-        return tap(args.tap, args.json)
-    if args.quick:
-        args.rates, args.drives, args.cycles = "1000", "1-2", 1000
-    os.environ.setdefault("PYTHONPATH", str(REPO / "python"))
-    if str(REPO / "python") not in os.environ["PYTHONPATH"].split(os.pathsep):
-        os.environ["PYTHONPATH"] = os.pathsep.join([str(REPO / "python"), os.environ["PYTHONPATH"]])
-    from servoamp import qemu
-
-    if not os.environ.get("SERVOAMP_QEMU"):
-        os.environ["SERVOAMP_QEMU"] = str(qemu.project_qemu() / "bin" / qemu.QEMU_ANY_BOARD)
-    rates = parse_range(args.rates)
-    drives = parse_range(args.drives)
+def measure(rates: list[int], drives: list[int], args: argparse.Namespace,
+            runs: str = "runs") -> list[dict[str, Any]]:
+    """Every point of ``rates`` x ``drives`` with the QEMU $SERVOAMP_QEMU
+    names (refused points listed as refused); each boot's files in
+    build-dir/``runs``/."""
     args.build_dir.mkdir(parents=True, exist_ok=True)
-    t_start = time.monotonic()
     points: list[dict[str, Any]] = []
     for rate in rates:
         period = round(1e6 / rate)
@@ -433,7 +432,7 @@ def main(argv: list[str] | None = None) -> int:
             b = build(period, cfg2, args.build_dir, args.jobs)
             if not b.ok:
                 raise RuntimeError(f"{cfg2} at {period} us refused: {b.why}")
-            wd = args.build_dir / "runs" / b.dir.parent.name
+            wd = args.build_dir / runs / b.dir.parent.name
             shutil.rmtree(wd, ignore_errors=True)
             wd.mkdir(parents=True)
             t0 = time.monotonic()
@@ -448,6 +447,49 @@ def main(argv: list[str] | None = None) -> int:
                       f"bits/cycle {bl.get('bits_mean')} (max {bl.get('bits_max')}) load {bl.get('load_mean_pct')} % "
                       f"(firmware estimate {p['firmware_load_permille']} permille) "
                       f"[{time.monotonic() - t0:.0f} s]", flush=True)
+    return points
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cycles", type=int, default=2000, help="window per point, cycles (a multiple of 1000)")
+    ap.add_argument("--rates", default="1000,2000,4000", help="cycle rates, Hz")
+    ap.add_argument("--drives", default="1-5", help="drives per bus to try")
+    ap.add_argument("--quick", action="store_true", help="1 kHz, 1-2 drives, 1000 cycles (a smoke run)")
+    ap.add_argument("--json", type=Path)
+    ap.add_argument("--build-dir", type=Path, default=REPO / "build" / "bench" / "fieldbus")
+    ap.add_argument("-j", "--jobs", type=int, default=2)
+    ap.add_argument("--baseline-qemu", type=Path, metavar="QEMU",
+                    help="also run every point with this qemu-system-aarch64 (the build before a change), "
+                         "in the same run: the SYNC jitter figures' notes give its figure, 'baseline' its "
+                         "SYNC jitter per point")
+    ap.add_argument("--baseline-label", default="the baseline QEMU", help="what --baseline-qemu is, for the notes")
+    ap.add_argument("--tap", type=Path, help=argparse.SUPPRESS)  # internal: the bus client (--json: its file)
+    args = ap.parse_args(argv)
+    if args.tap:
+        return tap(args.tap, args.json)
+    if args.quick:
+        args.rates, args.drives, args.cycles = "1000", "1-2", 1000
+    os.environ.setdefault("PYTHONPATH", str(REPO / "python"))
+    if str(REPO / "python") not in os.environ["PYTHONPATH"].split(os.pathsep):
+        os.environ["PYTHONPATH"] = os.pathsep.join([str(REPO / "python"), os.environ["PYTHONPATH"]])
+    from servoamp import qemu
+
+    if not os.environ.get("SERVOAMP_QEMU"):
+        os.environ["SERVOAMP_QEMU"] = str(qemu.project_qemu() / "bin" / qemu.QEMU_ANY_BOARD)
+    rates = parse_range(args.rates)
+    drives = parse_range(args.drives)
+    t_start = time.monotonic()
+    points = measure(rates, drives, args)
+    baseline = None
+    if args.baseline_qemu:
+        ours = os.environ["SERVOAMP_QEMU"]
+        os.environ["SERVOAMP_QEMU"] = str(args.baseline_qemu)
+        print(f"\nthe same points with {args.baseline_qemu} ({args.baseline_label})", flush=True)
+        base_points = measure(rates, drives, args, runs="runs-baseline")
+        os.environ["SERVOAMP_QEMU"] = ours
+        baseline = {"qemu": str(args.baseline_qemu), "label": args.baseline_label,
+                    "sync_jitter": {tag_of(p): j for p in base_points if (j := sync_jitter(p)) is not None}}
     points.sort(key=lambda p: (p["rate_hz"], p["drives"]))
     print()
     print(table(points, rates))
@@ -458,8 +500,10 @@ def main(argv: list[str] | None = None) -> int:
         "bitrate": BITRATE, "window_cycles": args.cycles,
         "host_seconds": round(time.monotonic() - t_start, 1),
         "points": points,
-        "figures": figures(points, rates),
+        "figures": figures(points, rates, baseline),
     }
+    if baseline is not None:
+        doc["baseline"] = baseline
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(doc, indent=1) + "\n")

@@ -120,15 +120,16 @@ BENCHMARKS: dict[str, Bench] = {b.name: b for b in (
           boards=("zynq7000_qemu",),
           not_yet="not yet: can_bench.py builds its firmware from overlays of boards/zynq7000_qemu/"
                   "servo.dts only (the board is fixed in the script; the ZynqMP's CAN: issue 35 item 4)"),
-    Bench("rt_latency", "servod's wake-up and cyclictest on both kernels (vanilla, PREEMPT_RT) at 1 and 4 kHz, "
-          "idle and under hackbench, a CPU hog, bulk TCP and a recovery (virtual time)",
-          True, "about 20 min at 10,000 cycles per window (two kernel boots, 20 windows; 100,000: about 4.7 h of one core, --jobs 2 --resume)",
+    Bench("rt_latency", "servod's wake-up and cyclictest on the board's kernels (zynq7000_qemu: vanilla and "
+          "PREEMPT_RT; zynqmp_qemu: PREEMPT_RT) at 1 and 4 kHz, idle and under hackbench, a CPU hog, bulk TCP "
+          "and a recovery (virtual time)",
+          True, "at 10,000 cycles per window: about 20 min on zynq7000_qemu (two kernel boots, 20 windows; "
+                "100,000: about 4.7 h of one core, --jobs 2 --resume), about 23 min on zynqmp_qemu (one boot, "
+                "10 windows; measured with a load average of 10-12)",
           (),
-          ("{python}", "bench/cycle/rt_latency_bench.py", "--json", "{json}"),
+          ("{python}", "bench/cycle/rt_latency_bench.py", "--board", "{board}", "--json", "{json}"),
           ("--cycles", "500", "--loads", "idle,cpu"),
-          boards=("zynq7000_qemu",),
-          not_yet="not yet: rt_latency_bench.py boots zynq7000_qemu's two kernels only (the A53 RT "
-                  "kernel's table is issue 35 item 5)"),
+          boards=("zynq7000_qemu", "zynqmp_qemu")),
     Bench("recorder", "recording encodings, JSON (servoamp record) vs protobuf (servoamp bridge, foxglove-sdk): "
           "bytes/cycle, CPU per 1000 cycles, max rate x axes at 4 and 8 axes",
           False, "about 2-3 min (one rate ramp per encoding and axis count)",

@@ -25,18 +25,14 @@ and a write error (a full disk) ends it cleanly: RecordingError, the file
 readable up to the last flush.
 
 CAN frames (``can_links``, bus -> canlink socket of our QEMU): every frame
-on each emulated bus, on /servoamp/can<bus> (CanFrame), read as a passive
-canlink client (QEMU never waits for it). Their clock is the emulator's
-virtual time; their log time is put on the cycle records' clock (the
-controller's CLOCK_MONOTONIC) by :class:`GuestClock` (from the cycle
-records and the servo core's time stamps on the bus), so that a frame
-sits in the cycle it was on the bus in. docs/recording.md "CAN frames".
+on each emulated bus, on /servoamp/can<bus> (CanFrame), on the cycle
+records' clock (:mod:`servoamp.bridge_can`); with ``telemetry=False`` the
+bridge carries only those, on the emulator's virtual time (a machine
+without servod). docs/recording.md "CAN frames".
 """
 
 from __future__ import annotations
 
-import collections
-import itertools
 import json
 import os
 import secrets
@@ -59,16 +55,15 @@ from foxglove.websocket import Capability
 from servoamp import canlink, pbenc
 from servoamp import telemetry as tw
 from servoamp import wsfront
-from servoamp.bridge_params import (READ_ONLY, FrontAuth, Listener, ParamError, ParamInfo,  # noqa: F401
+from servoamp.bridge_can import CAN_PENDING_MAX, T_CAN, TIME_STAMP_ID, CanTap  # noqa: F401
+from servoamp.bridge_params import (MSG_REQUEST, READ_ONLY, REPLY_HDR, REQUEST_MAX,  # noqa: F401
+                                    FrontAuth, Listener, ParamError, ParamInfo, ServodParams,
                                     fox_param, parse_param_list)
 from servoamp.guestclock import GuestClock
 from servoamp.record import RecordResult
 from servoamp.schemas import servoamp_pb2 as pb
 
-MSG_REQUEST = 9   # client -> server: u32 id, text
 MSG_REPLY = 10    # server -> client: u32 id, i32 status, u32 n, text
-REPLY_HDR = struct.Struct("<IiI")
-REQUEST_MAX = 256
 # The recording is flushed (its chunk closed and written) at this much
 # telemetry too: well under the SDK's chunk size (1 MiB), so that the SDK
 # never writes a chunk by itself inside log(), where a write error (a full
@@ -87,14 +82,6 @@ T_SESSION = "/servoamp/session"
 CHANNELS = {T_CYCLE: "Cycle", T_PARAM: "ParamChange", T_STATS: "Stats", T_GAP: "Gap",
             T_QUEUES: "QueueLevels", T_SESSION: "Session"}
 TOPICS = sorted(list(CHANNELS) + [T_LOG])
-
-T_CAN = "/servoamp/can{bus}"   # one per CAN bus: CanFrame
-TIME_STAMP_ID = 0x1FF           # the master's time stamp PDO (canopen_master.h CO_COB_TIME_STAMP)
-# a CYCLE payload's fixed fields (cycle, t_ns, servo_cycle, t_cycle, irq
-# latency, wake-up latency, exchange, ...): the records of any axis count
-_CYCLE_HEAD = tw.cycle_struct(0)
-# frames held while the clock offset is not known yet (the first cycles)
-CAN_PENDING_MAX = 1 << 17
 
 _LEVELS = {0: LogLevel.Unknown, 1: LogLevel.Debug, 2: LogLevel.Info, 3: LogLevel.Warning,
            4: LogLevel.Error, 5: LogLevel.Fatal}
@@ -116,7 +103,7 @@ class RecordingError(Exception):
     """The MCAP file could not be written (a full disk): recording stopped."""
 
 
-class Bridge:
+class Bridge(ServodParams):
     """Telemetry client + Foxglove SDK sinks (WebSocket server, MCAP file)."""
 
     def __init__(self, host: str, port: int, *, token: bytes | str | None = None,
@@ -127,14 +114,16 @@ class Bridge:
                  params: bool = True, ws_token: str | None = None,
                  allow_origins: list[str] | tuple[str, ...] = wsfront.DEFAULT_ORIGINS,
                  flush_interval: float = 1.0, keep_live: bool = False,
-                 can_links: Mapping[int, str | Path] | None = None,
+                 can_links: Mapping[int, str | Path] | None = None, telemetry: bool = True,
                  on_progress: Callable[[RecordResult], None] | None = None) -> None:
+        if not telemetry and not can_links:
+            raise ValueError("without telemetry the bridge carries CAN frames only: give can_links")
         self.host, self.port = host, port
+        self.telemetry = telemetry
         self.auth = tw.encode_auth(token)
         self.reconnect = reconnect
         self.connect_timeout = connect_timeout
         self.max_backoff = max_backoff
-        self.request_timeout = request_timeout
         self.on_progress = on_progress
         self.res = RecordResult(path=str(mcap) if mcap else "")
         self.ctx = foxglove.Context()
@@ -146,10 +135,7 @@ class Bridge:
         self.ch_log = LogChannel(T_LOG, context=self.ctx)
         # telemetry state
         self.sock: socket.socket | None = None
-        self.send_lock = threading.Lock()
-        self.req_ids = itertools.count(1)
-        self.pending: dict[int, tuple[threading.Event, list[Any]]] = {}
-        self.pending_lock = threading.Lock()
+        self._init_params(request_timeout)
         self.hello: tw.Hello | None = None
         # (cycle, t_ns) of the newest cycle record at the last STATS
         self.prev_stats: tuple[int, int] | None = None
@@ -162,7 +148,6 @@ class Bridge:
         self.pending_reconnect: tuple[int | None, bool] | None = None
         self.final_seen = False
         self.meta_written = False
-        self.params: dict[str, ParamInfo] = {}
         # the live view's subscriptions: (server, client id) -> topics
         self._subs: dict[tuple[bool, int], set[str]] = {}
         self._subs_lock = threading.Lock()
@@ -213,103 +198,22 @@ class Bridge:
                 str(mcap), allow_overwrite=True, context=self.ctx,
                 writer_options=MCAPWriteOptions(compression=MCAPCompression.Zstd,
                                                 chunk_size=1 << 20))
-        # CAN: a passive canlink client and a reader thread per bus
-        self.clock = GuestClock()
-        self.ch_can: dict[int, Channel] = {}
+        # CAN: a passive canlink client and a reader thread per bus; without
+        # telemetry (no cycle records) on the emulator's virtual time
+        self.clock = GuestClock() if telemetry else GuestClock.virtual()
+        self.can: CanTap | None = None
         self.can_errors: dict[int, str] = {}
-        self.can_dropped = 0          # frames over CAN_PENDING_MAX before the clock was known
-        self._can_lock = threading.Lock()
-        self._can_pending: collections.deque[tuple[int, int, bytes]] = collections.deque()
-        self._can_stop = threading.Event()
-        self._can_threads: list[threading.Thread] = []
         if can_links:
-            self._start_can(can_links)
+            try:
+                self.can = CanTap(self.ctx, self.fds, self.res, self.clock, can_links,
+                                  connect_timeout, self._mark_dirty)
+            except BaseException:
+                self.close()
+                raise
+            self.can_errors = self.can.errors
 
-    # -- CAN frames -----------------------------------------------------------------------
-    def _start_can(self, can_links: Mapping[int, str | Path]) -> None:
-        links: dict[int, canlink.Link] = {}
-        try:
-            for bus, path in sorted(can_links.items()):
-                try:
-                    links[bus] = canlink.Link.connect(str(path), active=False, name="bridge",
-                                                      timeout=self.connect_timeout)
-                except (OSError, canlink.ProtocolError) as e:
-                    raise ConnectionError(f"CAN bus {bus}: canlink socket {path}: {e}") from e
-        except BaseException:
-            for lk in links.values():
-                lk.close()
-            self.close()
-            raise
-        for bus, lk in links.items():
-            self.ch_can[bus] = Channel(T_CAN.format(bus=bus), message_encoding="protobuf",
-                                       context=self.ctx,
-                                       schema=Schema(name="servoamp.CanFrame", encoding="protobuf",
-                                                     data=self.fds))
-            self.res.can_frames[bus] = 0
-            th = threading.Thread(target=self._can_loop, args=(bus, lk), daemon=True,
-                                  name=f"bridge-can{bus}")
-            self._can_threads.append(th)
-            th.start()
-
-    def _can_loop(self, bus: int, lk: canlink.Link) -> None:
-        """Reads one bus until close() or QEMU's BYE. A passive client must
-        keep reading: QEMU drops a client whose socket buffer is full."""
-        bit_ns = 1e9 / lk.bitrate
-        bus_free = 0        # end of the latest frame seen on this bus
-        try:
-            while not self._can_stop.is_set():
-                rec = lk.recv(0.2)
-                if rec is None:
-                    continue
-                if rec.type == canlink.BYE:
-                    break
-                if rec.type not in (canlink.FRAME, canlink.ERROR):
-                    continue
-                error = rec.type == canlink.ERROR       # a frame destroyed by a bus error
-                data = rec.data     # exactly dlc bytes, none for a remote frame
-                bits = 0 if error else canlink.frame_bits(rec.can_id, rec.eff, rec.rtr, rec.dlc, data)
-                msg = pb.CanFrame(bus=bus, t_bus_ns=rec.t_ns, id=rec.can_id, extended=rec.eff,
-                                  remote=rec.rtr, dlc=rec.dlc, data=data, bits=bits,
-                                  from_servo=not rec.info, error=error).SerializeToString()
-                start = rec.t_ns - round(bits * bit_ns)
-                stamp = (not error and not rec.info and not rec.eff and not rec.rtr and rec.dlc == 4
-                         and rec.can_id == TIME_STAMP_ID and start >= bus_free)
-                bus_free = max(bus_free, rec.t_ns)
-                with self._can_lock:
-                    if stamp and self.clock.add_stamp(start, int.from_bytes(data, "little")):
-                        self._flush_can_pending()
-                    if self.clock.offset_ns is None:
-                        if len(self._can_pending) < CAN_PENDING_MAX:
-                            self._can_pending.append((bus, rec.t_ns, msg))
-                        else:
-                            self.can_dropped += 1
-                        continue
-                    self._log_can(bus, rec.t_ns, msg)
-        except (OSError, canlink.ProtocolError) as e:
-            self.can_errors[bus] = f"CAN bus {bus}: {e}"
-        finally:
-            lk.close()
-
-    def _log_can(self, bus: int, t_bus_ns: int, msg: bytes) -> None:
-        """Under _can_lock, the clock known."""
-        self.ch_can[bus].log(msg, log_time=self.clock.to_monotonic(t_bus_ns))
-        self.res.can_frames[bus] += 1
+    def _mark_dirty(self) -> None:
         self._dirty = True
-
-    def _clock_sample(self, buf: bytearray, off: int) -> None:
-        """A cycle record for the CAN frames' clock (fresh exchanges only)."""
-        _cyc, t_ns, _sc, t_cycle, _irq, lat, exch = _CYCLE_HEAD.unpack_from(buf, off)[:7]
-        if exch != 0:
-            return
-        hz = self.hello.clock_hz if self.hello is not None else 0
-        with self._can_lock:
-            if self.clock.add_cycle(t_ns, lat, t_cycle, hz):
-                self._flush_can_pending()
-
-    def _flush_can_pending(self) -> None:
-        """Under _can_lock, the clock just known."""
-        while self._can_pending:
-            self._log_can(*self._can_pending.popleft())
 
     # -- the app's side ----------------------------------------------------------------
     @property
@@ -357,21 +261,16 @@ class Bridge:
         if self.sock is not None:
             self.sock.close()
             self.sock = None
-        self._can_stop.set()
-        for th in self._can_threads:
-            th.join(timeout=5)
-        self._can_threads = []
+        if self.can is not None:
+            self.can.close()
         self._stop_servers()
         if self.mcap is not None:
             m, self.mcap = self.mcap, None
             meta = {"cycles": str(self.res.cycles), "connections": str(self.res.connections),
                     "gaps": str(len(self.res.gaps)), "stopped_by": self.res.stopped_by or "error",
                     "last_stats": json.dumps(self.res.last_stats)}
-            if self.ch_can:
-                meta |= {"can_frames": json.dumps(self.res.can_frames),
-                         "can_pending_lost": str(self.can_dropped + len(self._can_pending)),
-                         "can_clock_offset_ns": str(self.clock.offset_ns),
-                         "can_errors": json.dumps(self.can_errors)}
+            if self.can is not None:
+                meta |= self.can.metadata()
             try:
                 m.write_metadata("servoamp.recording", meta)
                 m.close()
@@ -421,35 +320,6 @@ class Bridge:
                 raise RecordingError(msg) from None
             print(f"servoamp bridge: {msg}; the live view goes on", file=sys.stderr, flush=True)
 
-    # -- parameters through servod ------------------------------------------------------
-    def request(self, text: str) -> str:
-        """One REQUEST to servod: its output, or ParamError with its message."""
-        data = text.encode()
-        if len(data) > REQUEST_MAX:
-            raise ParamError(1, "request too long")
-        rid = next(self.req_ids) & 0xFFFFFFFF
-        ev = threading.Event()
-        slot: list[Any] = []
-        with self.pending_lock:
-            self.pending[rid] = (ev, slot)
-        try:
-            with self.send_lock:
-                if self.sock is None:
-                    raise ParamError(-3, "not connected to the controller")
-                self.sock.sendall(tw.FRAME.pack(MSG_REQUEST, 0, 4 + len(data))
-                                  + struct.pack("<I", rid) + data)
-            if not ev.wait(self.request_timeout):
-                raise ParamError(-4, f"no answer from the controller in {self.request_timeout} s")
-        except OSError as e:
-            raise ParamError(-3, f"not connected to the controller: {e}") from None
-        finally:
-            with self.pending_lock:
-                self.pending.pop(rid, None)
-        status, msg = slot
-        if status != 0:
-            raise ParamError(status, msg)
-        return str(msg)
-
     def subscribed(self, topics: set[str] | frozenset[str]) -> bool:
         """True when one live-view client (on either server) has subscribed
         to every one of topics: from then on it gets each message logged on
@@ -464,34 +334,6 @@ class Bridge:
                 t.add(topic)
             else:
                 t.discard(topic)
-
-    def list_params(self) -> dict[str, ParamInfo]:
-        self.params = parse_param_list(self.request("param list"))
-        return self.params
-
-    def set_param(self, name: str, value: float | int | str) -> float | int:
-        """Set through servod: the value the servo took (ParamError if refused)."""
-        if isinstance(value, float) and value.is_integer() and \
-                self.params.get(name, None) is not None and self.params[name].type != "f32":
-            value = int(value)
-        out = self.request(f"param set {name} {value}")
-        v = out.strip().split("=", 1)[1].split()[0]
-        info = self.params.get(name)
-        if info is not None:
-            info.value = float(v) if info.type == "f32" else int(v)
-            return info.value
-        return float(v)
-
-    def _on_reply(self, p: bytes) -> None:
-        if len(p) < REPLY_HDR.size:
-            return
-        rid, status, n = REPLY_HDR.unpack_from(p)
-        text = p[REPLY_HDR.size:REPLY_HDR.size + min(n, len(p) - REPLY_HDR.size)]
-        with self.pending_lock:
-            entry = self.pending.get(rid)
-        if entry is not None:
-            entry[1][:] = [status, text.decode("utf-8", "replace")]
-            entry[0].set()
 
     # -- telemetry -> channels ----------------------------------------------------------
     def _gap(self, t_ns: int, reason: str, source: str, frm: int | None, to: int | None,
@@ -551,8 +393,8 @@ class Bridge:
                 if enc is None or ln < csize:
                     raise tw.ProtocolError(f"CYCLE of {ln} bytes, expected {csize}")
                 cyc, t_ns = cyc_from(buf, off)
-                if self.ch_can and self.clock.gt_minus_mono_ns is None:
-                    self._clock_sample(buf, off)
+                if self.can is not None and self.can.wants_cycles:
+                    self.can.cycle_sample(buf, off, self.hello.clock_hz if self.hello else 0)
                 if cyc != self.expect:
                     self._cycle_discontinuity(cyc, t_ns)
                 self.expect = cyc + 1
@@ -644,7 +486,9 @@ class Bridge:
     def run(self, duration: float | None = None, stop: threading.Event | None = None
             ) -> RecordResult:
         """Stream until duration (s, wall clock) elapses, stop is set, or
-        (reconnect=False) the stream ends. Reconnects like ``servoamp record``."""
+        (reconnect=False) the stream ends. Reconnects like ``servoamp record``.
+        Without telemetry: until duration, stop, or every CAN bus ended
+        (QEMU's BYE)."""
         stop = stop or threading.Event()
         res = self.res
         t0 = time.monotonic()
@@ -660,6 +504,15 @@ class Bridge:
                 if deadline is not None and now >= deadline:
                     res.stopped_by = "duration"
                     break
+                if not self.telemetry:
+                    # CAN frames only: their readers log; the recording is
+                    # flushed here; the end when every bus is gone (QEMU quit)
+                    if self.can is not None and self.can.ended:
+                        res.stopped_by = "eof"
+                        break
+                    stop.wait(self.flush_interval if deadline is None
+                              else min(self.flush_interval, max(0.0, deadline - now)))
+                    continue
                 if self.sock is None:
                     try:
                         s = socket.create_connection((self.host, self.port), timeout=1.0)
@@ -713,9 +566,3 @@ class Bridge:
             res.wall_s = time.monotonic() - t0
             res.cpu_s = time.process_time() - c0
         return res
-
-    def _fail_pending(self, why: str) -> None:
-        with self.pending_lock:
-            for ev, slot in self.pending.values():
-                slot[:] = [-3, why]
-                ev.set()

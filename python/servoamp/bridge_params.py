@@ -1,5 +1,6 @@
 """The bridge's parameters: servod's table as the Foxglove parameters
-capability sees it, the SDK servers' callbacks, and who may set
+capability sees it, the requests that read and set them through servod
+(:class:`ServodParams`), the SDK servers' callbacks, and who may set
 (:mod:`servoamp.bridge`, docs/recording.md "Live: who may connect").
 
 Who may set is decided by the front (:mod:`servoamp.wsfront`), not by who
@@ -16,19 +17,27 @@ server's, and changes nothing.
 
 from __future__ import annotations
 
+import itertools
 import secrets
+import socket
+import struct
 import threading
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Iterator, Protocol
 
 from foxglove import Parameter, ParameterType
 from foxglove.websocket import ServerListener, StatusLevel
+
+from servoamp import telemetry as tw
 
 READ_ONLY = ("servoamp: this connection is read-only: parameters are set through the URL "
              "with the token that servoamp bridge printed")
 NOT_VOUCHED = ("servoamp: parameters are set only through the bridge's port, with the URL "
                "and token that servoamp bridge printed: this connection did not come through it")
 AUTH_PREFIX = "servoamp-front-"
+MSG_REQUEST = 9   # client -> server: u32 id, text
+REPLY_HDR = struct.Struct("<IiI")   # MSG_REPLY: u32 id, i32 status, u32 n, text
+REQUEST_MAX = 256
 
 
 class ParamError(Exception):
@@ -69,6 +78,90 @@ def fox_param(name: str, typ: str, v: float | int) -> Parameter:
     if typ == "f32":
         return Parameter(name, value=float(v), type=ParameterType.Float64)
     return Parameter(name, value=int(v))
+
+
+class ServodParams:
+    """Parameters through servod, for :class:`servoamp.bridge.Bridge`:
+    REQUEST frames on its telemetry connection (docs/telemetry.md
+    "Requests"), each waiting for its REPLY."""
+
+    sock: socket.socket | None
+    send_lock: threading.Lock
+    req_ids: Iterator[int]
+    pending: dict[int, tuple[threading.Event, list[Any]]]
+    pending_lock: threading.Lock
+    request_timeout: float
+    params: dict[str, ParamInfo]
+
+    def _init_params(self, request_timeout: float) -> None:
+        self.send_lock = threading.Lock()
+        self.req_ids = itertools.count(1)
+        self.pending = {}
+        self.pending_lock = threading.Lock()
+        self.request_timeout = request_timeout
+        self.params = {}
+
+    def request(self, text: str) -> str:
+        """One REQUEST to servod: its output, or ParamError with its message."""
+        data = text.encode()
+        if len(data) > REQUEST_MAX:
+            raise ParamError(1, "request too long")
+        rid = next(self.req_ids) & 0xFFFFFFFF
+        ev = threading.Event()
+        slot: list[Any] = []
+        with self.pending_lock:
+            self.pending[rid] = (ev, slot)
+        try:
+            with self.send_lock:
+                if self.sock is None:
+                    raise ParamError(-3, "not connected to the controller")
+                self.sock.sendall(tw.FRAME.pack(MSG_REQUEST, 0, 4 + len(data))
+                                  + struct.pack("<I", rid) + data)
+            if not ev.wait(self.request_timeout):
+                raise ParamError(-4, f"no answer from the controller in {self.request_timeout} s")
+        except OSError as e:
+            raise ParamError(-3, f"not connected to the controller: {e}") from None
+        finally:
+            with self.pending_lock:
+                self.pending.pop(rid, None)
+        status, msg = slot
+        if status != 0:
+            raise ParamError(status, msg)
+        return str(msg)
+
+    def list_params(self) -> dict[str, ParamInfo]:
+        self.params = parse_param_list(self.request("param list"))
+        return self.params
+
+    def set_param(self, name: str, value: float | int | str) -> float | int:
+        """Set through servod: the value the servo took (ParamError if refused)."""
+        if isinstance(value, float) and value.is_integer() and \
+                self.params.get(name, None) is not None and self.params[name].type != "f32":
+            value = int(value)
+        out = self.request(f"param set {name} {value}")
+        v = out.strip().split("=", 1)[1].split()[0]
+        info = self.params.get(name)
+        if info is not None:
+            info.value = float(v) if info.type == "f32" else int(v)
+            return info.value
+        return float(v)
+
+    def _on_reply(self, p: bytes) -> None:
+        if len(p) < REPLY_HDR.size:
+            return
+        rid, status, n = REPLY_HDR.unpack_from(p)
+        text = p[REPLY_HDR.size:REPLY_HDR.size + min(n, len(p) - REPLY_HDR.size)]
+        with self.pending_lock:
+            entry = self.pending.get(rid)
+        if entry is not None:
+            entry[1][:] = [status, text.decode("utf-8", "replace")]
+            entry[0].set()
+
+    def _fail_pending(self, why: str) -> None:
+        with self.pending_lock:
+            for ev, slot in self.pending.values():
+                slot[:] = [-3, why]
+                ev.set()
 
 
 class FrontAuth:

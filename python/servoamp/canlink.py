@@ -290,6 +290,24 @@ def frame_bits(can_id: int, eff: bool, rtr: bool, dlc: int, data: bytes) -> int:
     return length + stuff + TRAILER_BITS
 
 
+def arbitration_key(can_id: int, eff: bool, rtr: bool) -> int:
+    """The arbitration field as a number, as canlink orders the frames that
+    contend for the bus (docs/canlink.md, "Arbitration"): of two frames
+    starting together the one with the lower key wins, as on the wire the
+    first bit they differ in is dominant (0) for the winner. Standard:
+    11-bit id, RTR, IDE 0; extended: base id, SRR 1, IDE 1, 18-bit
+    extension, RTR. So the lower base id first; with the same base id a
+    standard data frame, then a standard remote frame, then the extended
+    ones (data before remote). The same bits as ``frame_bitstream`` from
+    the first id bit to the last bit of the arbitration field (a test
+    compares them)."""
+    if not 0 <= can_id <= (EFF_MAX if eff else SFF_MAX):
+        raise ValueError(f"can_id {can_id:#x} out of range")
+    if eff:
+        return (can_id >> 18) << 21 | 1 << 20 | 1 << 19 | (can_id & 0x3FFFF) << 1 | int(rtr)
+    return can_id << 21 | int(rtr) << 20
+
+
 # --- the client ---------------------------------------------------------------
 
 

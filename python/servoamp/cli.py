@@ -111,7 +111,14 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
     token, rc = _token(args, "bridge")
     if rc:
         return rc
-    host, port = args.connect
+    if args.no_telemetry and not args.can:
+        print("servoamp bridge: --no-telemetry carries CAN frames only: give --can", file=sys.stderr)
+        return 2
+    if not args.no_telemetry and args.connect is None:
+        print("servoamp bridge: --connect HOST:PORT (servod's telemetry) is required, "
+              "unless --no-telemetry", file=sys.stderr)
+        return 2
+    host, port = args.connect or ("127.0.0.1", 0)
     ws_host, ws_port = args.listen
     ws_token = None
     if args.ws_token_file:
@@ -130,7 +137,7 @@ def _cmd_bridge(args: argparse.Namespace) -> int:
                    connect_timeout=args.connect_timeout, params=not args.no_params,
                    ws_token=ws_token, allow_origins=[*DEFAULT_ORIGINS, *args.allow_origin],
                    flush_interval=args.flush_interval, keep_live=args.keep_live,
-                   can_links=dict(args.can))
+                   can_links=dict(args.can), telemetry=not args.no_telemetry)
     except (OSError, RuntimeError, ValueError) as e:
         print(f"servoamp bridge: {e}", file=sys.stderr)
         return 4
@@ -202,7 +209,12 @@ def main(argv: list[str] | None = None) -> int:
 
     p = sub.add_parser("bridge", help="serve the telemetry to Foxglove (WebSocket) and "
                                       "record it (MCAP) through the Foxglove SDK")
-    p.add_argument("--connect", type=_hostport, required=True, metavar="HOST:PORT")
+    p.add_argument("--connect", type=_hostport, metavar="HOST:PORT",
+                   help="servod's telemetry (required unless --no-telemetry)")
+    p.add_argument("--no-telemetry", action="store_true",
+                   help="no servod (a machine without Linux): carry only the --can buses, "
+                        "their frames logged on the emulator's virtual time; ends when QEMU "
+                        "has closed every bus")
     p.add_argument("--listen", type=_hostport, default=("127.0.0.1", 8765), metavar="HOST:PORT",
                    help="the Foxglove WebSocket server's address (default 127.0.0.1:8765; "
                         "port 0: any free port)")

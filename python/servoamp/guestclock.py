@@ -44,6 +44,14 @@ class GuestClock:
         self.virt_minus_gt_ns: int | None = None
         self.wrap_ns: int | None = None      # 2^32 servo ticks, from the records' clock_hz
 
+    @classmethod
+    def virtual(cls) -> GuestClock:
+        """No controller's clock (a machine without servod: no cycle
+        records): the emulator's virtual time itself, offset 0."""
+        c = cls()
+        c.gt_minus_mono_ns = c.virt_minus_gt_ns = 0
+        return c
+
     @property
     def offset_ns(self) -> int | None:
         """virtual - monotonic, once known, in [0, wrap_ns)."""

@@ -36,6 +36,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 MARKER = ".servoamp-build.json"
@@ -76,11 +77,14 @@ def resolve_source(src: str) -> Path:
     raise BuildError(f"no application with a Makefile at '{src}' (looked in {Path.cwd()} and {REPO})")
 
 
-def read_marker(build_dir: Path) -> dict | None:
+def read_marker(build_dir: Path) -> dict[str, Any] | None:
+    """The marker 'west build' leaves in a build directory (a JSON object),
+    or None when there is none or it is not one."""
     try:
-        return json.loads((build_dir / MARKER).read_text())
+        marker = json.loads((build_dir / MARKER).read_text())
     except (FileNotFoundError, ValueError):
         return None
+    return marker if isinstance(marker, dict) else None
 
 
 def make_pristine(build_dir: Path) -> None:

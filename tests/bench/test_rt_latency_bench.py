@@ -1,7 +1,8 @@
-"""bench/cycle/rt_latency_bench.py (issue 23's latency table): its
-percentiles, the cyclictest parser, the table and the figures on synthetic
-windows, the committed bench/results/rt_latency.json against its own
-windows, and mypy --strict. No QEMU run and no figure asserted (the run
+"""bench/cycle/rt_latency_bench.py (issue 23's latency table; issue 35: the
+ZynqMP's): its percentiles, the cyclictest parser, the table and the
+figures on synthetic windows, the boards' kernels and the refusals of the
+command line, the committed results of each board against their own
+windows, and mypy --strict (the script and its two modules). No QEMU run and no figure asserted (the run
 itself: bench/README.md, docs/cycle-figures.md, "Figures")."""
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from servoamp import bench
+from servoamp import bench, qemu
 
 TOP = Path(__file__).resolve().parents[2]
 SCRIPT = TOP / "bench" / "cycle" / "rt_latency_bench.py"
@@ -126,14 +127,42 @@ def test_merge_makes_one_table_of_separate_runs(rb: ModuleType) -> None:
         rb.merge_results([("a.json", a), ("b.json", {**b, "qemu": {"key": "other"}})])
     with pytest.raises(rb.MergeError, match="partial"):
         rb.merge_results([("a.json", {**a, "partial": True})])
+    with pytest.raises(rb.MergeError, match="board zynqmp_qemu"):
+        rb.merge_results([("a.json", a), ("b.json", {**b, "board": "zynqmp_qemu"})])
+    assert m["board"] == "zynq7000_qemu"     # parts from before --board: the Zynq-7000's
 
 
-def test_committed_results_agree_with_their_windows(rb: ModuleType) -> None:
-    path = TOP / "bench" / "results" / "rt_latency.json"
+def test_each_board_measures_its_own_kernels(rb: ModuleType) -> None:
+    assert rb.board_kernels(qemu.Board.load("zynq7000_qemu")) == ("vanilla", "rt")
+    assert rb.board_kernels(qemu.Board.load("zynqmp_qemu")) == ("rt",)
+
+
+def _run(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(SCRIPT), *args], capture_output=True, text=True, timeout=60, cwd=TOP)
+
+
+def test_the_command_line_refuses_what_the_board_does_not_have() -> None:
+    p = _run("--board", "zynqmp_qemu", "--kernels", "vanilla")
+    assert p.returncode == 2 and "'vanilla' is not one of zynqmp_qemu's (rt;" in p.stderr, p.stderr
+    p = _run("--board", "zynq9000_qemu")
+    assert p.returncode == 2 and "no boards/zynq9000_qemu/board.yaml" in p.stderr, p.stderr
+
+
+def test_the_overlay_script_knows_its_architectures() -> None:
+    p = subprocess.run([str(TOP / "linux/initramfs/build-rt-tests.sh"), "--arch", "mips"],
+                       capture_output=True, text=True, timeout=30)
+    assert p.returncode != 0 and "--arch mips: armhf or arm64" in p.stderr, p.stderr
+
+
+@pytest.mark.parametrize("board", ["zynq7000_qemu", "zynqmp_qemu"])
+def test_committed_results_agree_with_their_windows(rb: ModuleType, board: str) -> None:
+    path = TOP / "bench" / "results" / f"{bench.results_stem('rt_latency', board)}.json"
     if not path.exists():
-        pytest.skip("no bench/results/rt_latency.json yet")
+        pytest.skip(f"no {path.relative_to(TOP)} yet")
     doc = json.loads(path.read_text())
     assert bench.validate(doc) == []
+    assert doc.get("board", "zynq7000_qemu") == board
+    assert set(doc["kernels"]) <= set(rb.board_kernels(qemu.Board.load(board)))
     if "rates" not in next(iter(doc["kernels"].values())):
         pytest.skip("results of the first figure (before the table)")
     figs = {f["name"]: f["value"] for f in doc["figures"]}

@@ -32,6 +32,14 @@ is the host side itself:
   behind; idle connections cannot lock the bus out (a HELLO takes the
   oldest idle slot, the rest close after hello-timeout-ms); a logger and a
   listener get SYNC, its answers and the frames after it in bus order.
+- arbitration, guest-arbitration (patch 0028, issue 36): the frames that
+  answer one guest frame take the bus by CAN priority, whichever of two
+  active clients wrote them in whatever order (lower id first, standard
+  before extended for the same base id, data before remote); a frame the
+  guest sends while an answer waits for the bus wins against it when its
+  id is lower. This test checks the order the qtest saw against
+  servoamp.canlink.arbitration_key and their bus times against
+  frame_bits (back to back from the end of SYNC).
 
 The frame lengths the qtest expects come from servoamp.canlink.frame_bits
 (the qtest prints them); this test checks the two agree.
@@ -65,7 +73,8 @@ HERE = Path(__file__).resolve().parent
 LOAD = 0x00100000
 RESULT = 0x00200000
 CASES = ["exchange", "silent-client", "bad-record", "passive-client", "bus-error", "backlog",
-         "answers-charged", "flood", "backlog-memory", "hello-deadline", "bus-order"]
+         "answers-charged", "flood", "backlog-memory", "hello-deadline", "bus-order", "arbitration",
+         "guest-arbitration"]
 
 pytestmark = pytest.mark.board
 
@@ -97,6 +106,23 @@ def test_qtest_bus_times_agree_with_frame_bits(qtest_output: str) -> None:
         want = canlink.frame_bits(int(can_id, 16), fmt == "ext", kind == "rtr", int(dlc),
                                   bytes.fromhex(data))
         assert int(bits) == want, f"{can_id} {fmt} {kind} {dlc} {data}: qtest {bits}, frame_bits {want}"
+
+
+def test_qtest_arbitration_order_and_times(qtest_output: str) -> None:
+    """The frames of the qtest's arbitration case as a logger got them:
+    SYNC, then its seven answers in the order servoamp.canlink's
+    arbitration_key gives, each starting where the one before ended."""
+    canlink = pytest.importorskip("servoamp.canlink")
+    lines = re.findall(r"arbitration: (0x[0-9a-f]+) (std|ext) (data|rtr) (\d+) ([0-9a-f]+|-) at (\d+)",
+                       qtest_output)
+    assert len(lines) == 8, qtest_output
+    frames = [(int(i, 16), fmt == "ext", kind == "rtr", int(dlc), b"" if d == "-" else bytes.fromhex(d), int(t))
+              for i, fmt, kind, dlc, d, t in lines]
+    assert frames[0][:3] == (0x080, False, False)
+    keys = [canlink.arbitration_key(*f[:3]) for f in frames[1:]]
+    assert keys == sorted(keys) and len(set(keys)) == len(keys), frames
+    for prev, f in zip(frames, frames[1:]):
+        assert f[5] - prev[5] == canlink.frame_bits(*f[:5]) * 1000, (prev, f)   # 1 Mbit/s
 
 
 def _words(m: qemu.QemuMachine, addr: int, n: int) -> list[int]:

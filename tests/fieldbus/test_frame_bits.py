@@ -3,14 +3,16 @@
 the wire with ISO 11898-1 bit stuffing, checked against a bitstream built
 independently here (strings, CRC by polynomial long division, stuffing on
 the output stream) and against hand-computed frames and the worst-case
-bounds."""
+bounds; servoamp.canlink.arbitration_key (the order canlink gives frames
+that contend for the bus) against the same bitstream: the frame whose bit
+is dominant where the two first differ wins."""
 
 from __future__ import annotations
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from servoamp.canlink import TRAILER_BITS, frame_bits, frame_bitstream, stuff_count
+from servoamp.canlink import TRAILER_BITS, arbitration_key, frame_bits, frame_bitstream, stuff_count
 
 # x^15 + x^14 + x^10 + x^8 + x^7 + x^4 + x^3 + 1
 CRC15_DIVISOR = "1100010110011001"
@@ -130,3 +132,39 @@ def test_worst_case_bounds_are_the_known_ones() -> None:
     worst_std = max(frame_bits(i, False, False, 8, bytes([p] * 8)) for i in range(0, 0x800, 7) for p in (0, 0x0F, 0x78, 0xE1))
     assert 111 < worst_std <= 135
     assert frame_bits(0, False, False, 8, bytes(8)) <= 135
+
+
+def wins_on_the_wire(a: tuple[int, bool, bool], b: tuple[int, bool, bool]) -> int:
+    """-1 if frame a wins arbitration against b, 1 if b wins, 0 if neither
+    (the same arbitration field): the first bit after SOF where their
+    bitstreams differ, up to the end of the arbitration field (standard: id,
+    RTR and IDE, which a standard frame has where an extended one has its
+    IDE; extended: base id, SRR, IDE, extension, RTR), is dominant (0) for
+    the winner."""
+    sa, sb = (bitstream(i, e, r, 0, b"")[1:(33 if e else 14)] for i, e, r in (a, b))
+    for x, y in zip(sa, sb):
+        if x != y:
+            return -1 if x == "0" else 1
+    return 0
+
+
+frames = st.one_of(st.tuples(st.integers(0, 0x7FF), st.just(False), st.booleans()),
+                   st.tuples(st.integers(0, 0x1FFFFFFF), st.just(True), st.booleans()),
+                   # the same base id as a standard frame
+                   st.tuples(st.integers(0, 0x7FF).map(lambda i: i << 18), st.just(True), st.booleans()))
+
+
+@settings(max_examples=600, deadline=None)
+@given(a=frames, b=frames)
+def test_arbitration_key_orders_as_the_wire_does(a: tuple[int, bool, bool], b: tuple[int, bool, bool]) -> None:
+    ka, kb = arbitration_key(*a), arbitration_key(*b)
+    assert (ka > kb) - (ka < kb) == wins_on_the_wire(a, b)
+
+
+def test_arbitration_by_hand() -> None:
+    """Lower id first; with the same id data before remote; with the same
+    base id standard before extended."""
+    order = [(0x080, False, False), (0x181, False, False), (0x181, False, True),
+             (0x181 << 18, True, False), (0x181 << 18, True, True), ((0x181 << 18) | 1, True, False),
+             (0x182, False, False), (0x701, False, False)]
+    assert sorted(order, key=lambda f: arbitration_key(*f)) == order

@@ -1,0 +1,29 @@
+"""devicetree/validate.sh on each board's Linux DTB: servoamp's bindings
+pass dt-doc-validate, and dt-validate (the board's kernel's bindings plus
+servoamp's) reports nothing about servoamp's nodes (the reserved-memory
+carveouts, the OCM mailbox, the cycle interrupt, the remoteproc node: on
+the ZynqMP the upstream ``xlnx,zynqmp-r5fss`` binding of Linux 6.12)."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from servoamp import qemu
+
+REPO = Path(__file__).resolve().parents[2]
+BOARDS = ["zynq7000_qemu", "zynqmp_qemu"]
+
+
+@pytest.mark.board
+@pytest.mark.parametrize("board_name", BOARDS)
+def test_board_dtb_validates(board_name: str) -> None:
+    board = qemu.Board.load(board_name)
+    qemu.prepare_images(board)          # build/boards/<board>/linux.dtb and the board's kernel source
+    res = subprocess.run([str(REPO / "devicetree" / "validate.sh"), board_name], cwd=REPO,
+                         capture_output=True, text=True, timeout=1200)
+    assert res.returncode == 0, f"validate.sh {board_name}:\n{res.stdout[-4000:]}\n{res.stderr[-2000:]}"
+    assert "servoamp nodes (reserved-memory carveout, ocm-mailbox, cycle-interrupt, remoteproc): no findings" \
+        in res.stdout, res.stdout
