@@ -48,10 +48,6 @@ GUEST_ADDR = "10.0.2.15/24"
 NIC_MODEL = "cadence_gem"
 SERVOD_LOG = "/tmp/servod.log"
 TOKEN_FILE = "/tmp/telemetry.token"
-# the Zynq-7000's servo core (its only remoteproc); a ControllerBoard finds
-# its board's as servod does (:data:`FIND_RPROC`, ``cb.rproc``)
-RPROC = "/sys/class/remoteproc/remoteproc0"
-
 # Guest shell: the remoteproc instance of the servo core, found as servod
 # finds it (linux/servod/rproc.c): the OCM mailbox's UIO device's
 # devicetree node names it (servoamp,remoteproc, a phandle), and the
@@ -81,8 +77,6 @@ def stop_contract(board: qemu.Board) -> bool:
     BOARD_HAS_STOP_CONTRACT in the board_config.h its build generated;
     rpu_app/README.md). The ZynqMP's R5 has not: the upstream driver powers
     the core down without asking it."""
-    import re
-
     h = qemu.REPO / "build" / "rpu_app" / board.name / "board_config.h"
     m = re.search(r"^#define BOARD_HAS_STOP_CONTRACT\s+(?:BOARD_U\()?(\d+)", h.read_text(), re.M)
     if m is None:
