@@ -13,11 +13,12 @@ otherwise, for a test marked ``board`` or using the ``images``/``board``
 fixtures, the first board, zynq7000_qemu.
 
 Two QEMUs at once (``scripts/test.sh -j 2``: pytest-xdist with
-``--dist loadgroup``): every host test is in one group, run in order on
-one worker as before (they share build/ and make's outputs); a board
-test file is a group of its own (one boot per module, as its fixtures
-want; a file parametrized by board is a group per board), and each
-Robot suite is one. -icount keeps what a guest sees
+``--dist loadgroup``; opt-in, the default stays one process): every host
+test is in one group, run in order on one worker as before (they share
+build/ and make's outputs), with tests/viewer's board test (the viewer's
+build and browser); a board test file is a group of its own (one boot
+per module, as its fixtures want; a file parametrized by board is a group
+per board), and each Robot suite is one. -icount keeps what a guest sees
 independent of how many QEMUs share the host; the images are prepared
 under a lock (servoamp.images)."""
 
@@ -37,6 +38,9 @@ sys.path.insert(1, str(REPO / "tests"))
 FIRST_BOARD = "zynq7000_qemu"
 # folders whose tests all belong to one board
 BOARD_FOLDERS = {"tests/zynqmp": "zynqmp_qemu", "tests/robot/zynqmp": "zynqmp_qemu"}
+# folders whose board tests share outputs or servers with their host tests
+# (the viewer's build and Chromium): with -j N in the host group
+SHARED_GROUPS = ("tests/viewer",)
 # fixtures that boot (or build the images of) one board
 BOARD_FIXTURES = {"zynqmp_images": "zynqmp_qemu", "images": FIRST_BOARD, "board": FIRST_BOARD}
 
@@ -68,6 +72,11 @@ def chosen_boards(config: pytest.Config) -> list[str]:
     return picked or names
 
 
+def rel_dir(item: pytest.Item) -> str:
+    """The test file's folder, relative to the repository."""
+    return item.path.resolve().relative_to(REPO).parent.as_posix()
+
+
 def item_board(item: pytest.Item, names: list[str]) -> str | None:
     """The board ``item`` runs on, or None for a host test."""
     mark = item.get_closest_marker("on_board")
@@ -79,7 +88,7 @@ def item_board(item: pytest.Item, names: list[str]) -> str | None:
             name = value if isinstance(value, str) else getattr(value, "name", None)
             if isinstance(name, str) and name in names:
                 return name
-    rel = item.path.resolve().relative_to(REPO).parent.as_posix()
+    rel = rel_dir(item)
     for folder, name in BOARD_FOLDERS.items():
         if rel == folder or rel.startswith(folder + "/"):
             return name
@@ -106,7 +115,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             continue
         keep.append(item)
         if parallel:
-            if board is None:
+            if board is None or rel_dir(item).startswith(SHARED_GROUPS):
                 group = "host"
             elif item.path.suffix == ".py" and "robot_suite" in item.name:
                 group = item.nodeid           # one Robot suite, one boot
