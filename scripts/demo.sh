@@ -34,5 +34,7 @@ done
 scripts/bootstrap.sh
 guest=$(.venv/bin/python -c 'import sys, yaml; print(yaml.safe_load(open(sys.argv[1]))["demo"]["guest_commands"])' \
 	"boards/$board/board.yaml")
-.venv/bin/python scripts/west_commands/emu.py -b "$board" --accel tcg,thread=single --script "$guest" ${args[@]+"${args[@]}"}
+servod_args=$(PYTHONPATH=python .venv/bin/python -m servoamp.netboard --servod-args "$board")
+.venv/bin/python scripts/west_commands/emu.py -b "$board" --accel tcg,thread=single \
+	-c "SERVOD_ARGS='$servod_args'" --script "$guest" ${args[@]+"${args[@]}"}
 exec scripts/demo/record.sh --board "$board" --program --can

@@ -73,12 +73,13 @@ def kernel_link(kernel: str | None = None) -> Path:
 def kernel_dir(kernel: str | None = None) -> Path:
     """The kernel build of variant ``kernel`` (default:
     :func:`default_kernel`; ``build/kernel-rt`` or ``build/kernel`` -> cache), built if
-    missing."""
+    its inputs have no cached build."""
     kernel = kernel or default_kernel()
-    link = kernel_link(kernel)
-    if not (link / "ok").exists():
-        subprocess.run([REPO / "linux/kernel/build.sh", "--variant", kernel], check=True)
-    return link.resolve()
+    # always through the build script (0.1 s when its key is cached): a link
+    # left in build/ by an older configuration would boot a stale kernel
+    subprocess.run([REPO / "linux/kernel/build.sh", "--variant", kernel], check=True,
+                   stdout=subprocess.DEVNULL)
+    return kernel_link(kernel).resolve()
 
 
 def kernel_source(kdir: Path) -> Path:
@@ -351,10 +352,11 @@ def _prepare_stub_images(board: Board, firmware: Sequence[Path], dts_variant: st
 def board_kernel_dir(board: Board) -> Path:
     """The kernel of a board that names its own build (linux.build, e.g.
     linux/kernel/build-zynqmp.sh, and linux.link, the link it keeps to its
-    cache directory), built if missing."""
+    cache directory), built if its inputs have no cached build."""
     link = REPO / str(board.linux["link"])
-    if not (link / "ok").exists():
-        subprocess.run([REPO / str(board.linux["build"])], check=True)
+    # always through the build script (cached by its inputs: 0.1 s), so a
+    # link left by an older config fragment is moved to the current build
+    subprocess.run([REPO / str(board.linux["build"])], check=True, stdout=subprocess.DEVNULL)
     return link.resolve()
 
 

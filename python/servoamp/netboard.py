@@ -61,6 +61,17 @@ FIND_RPROC = (
     "&& echo RPROC=$r; done")
 
 
+def servod_board_args(board: qemu.Board) -> str:
+    """servod's options that name the board: its controller id (the
+    board's name, in the telemetry's HELLO and the recordings) and the rate
+    of the servo core's time base (board.yaml servo.clock_hz: the
+    feedback's t_cycle, which the bridge puts the CAN frames on). The demo
+    passes them too (scripts/demo.sh: ``python -m servoamp.netboard
+    --servod-args BOARD``)."""
+    hz = board.servo.get("clock_hz")
+    return f"--id {board.name}" + (f" --servo-clock-hz {int(hz)}" if hz else "")
+
+
 def find_rproc(sh: Callable[[str], str]) -> str:
     """The servo core's remoteproc directory in the guest (:data:`FIND_RPROC`
     through ``sh``, a guest shell), or QemuError when no mailbox node names
@@ -356,12 +367,8 @@ class ControllerBoard:
         return f"--telemetry {self.guest_addr.split('/')[0]}:{self.telemetry_port} --telemetry-token {TOKEN_FILE}"
 
     def servod_board_args(self) -> str:
-        """servod's options that name the board: its controller id (the
-        board's name, in the telemetry's HELLO and the recordings) and the
-        rate of the servo core's time base (board.yaml servo.clock_hz: the
-        feedback's t_cycle, which the bridge puts the CAN frames on)."""
-        hz = self.board.servo.get("clock_hz")
-        return f"--id {self.board.name}" + (f" --servo-clock-hz {int(hz)}" if hz else "")
+        """:func:`servod_board_args` of this board."""
+        return servod_board_args(self.board)
 
     def start_servod(self, args: str = "") -> None:
         """servod in the background, its log in /tmp/servod.log; waits until
@@ -402,3 +409,12 @@ class ControllerBoard:
             time.sleep(0.2)
         raise qemu.QemuError(f"no telemetry HELLO at 127.0.0.1:{self.host_port} "
                              f"within {timeout:g} s ({last})")
+
+
+if __name__ == "__main__":
+    import argparse
+
+    ap = argparse.ArgumentParser(description="board facts for scripts (scripts/demo.sh)")
+    ap.add_argument("--servod-args", metavar="BOARD", required=True,
+                    help="print servod's options that name BOARD (servod_board_args)")
+    print(servod_board_args(qemu.Board.load(ap.parse_args().servod_args)))
