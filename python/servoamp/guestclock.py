@@ -50,6 +50,7 @@ class GuestClock:
         records): the emulator's virtual time itself, offset 0."""
         c = cls()
         c.gt_minus_mono_ns = c.virt_minus_gt_ns = 0
+        c.wrap_ns = 1 << 64      # no servo timer to wrap: 0 stays 0
         return c
 
     @property

@@ -5,7 +5,9 @@ docs/canlink.md, "The exchange"), and the bus soaks up twenty of them
 
 Our QEMU under qtest (fieldbus_qemu.Board) with servoamp-drivesim (four
 drives, an ACTIVE client) and a host CANopen master that is a passive
-canlink client sending SYNC at 1 kHz of host time. The guest sends a frame
+canlink client sending SYNC at 1 kHz of host time, from a transmit queue
+of TX_QUEUE ticks: while it hears nothing from the bus it sends at most
+that many, as a CAN controller would. The guest sends a frame
 (each one an exchange with the simulator), then runs at least a
 millisecond of guest time, keeping guest time at twice host time at least.
 QEMU is paused (SIGSTOP, SIGCONT): the master's SYNCs pile up in its
@@ -116,6 +118,17 @@ class SdoRead:
     answer: tuple[str, int, int, int] | None = None
 
 
+# The master's transmit queue, in SYNC ticks (each with at most one SDO
+# request): what it may send while it hears nothing from the bus. 100 ticks
+# after a pause reach QEMU as one burst (100 SYNCs and SDO requests, then
+# 400 TPDOs and 100 SDO answers from the drives: more than the 32 answers
+# one guest frame was once charged with, within canlink's 1,024 held
+# frames), whatever the pause's length or the host's load; a master
+# sending on host time without a bound made the burst as long as the
+# host's stall and canlink rightly dropped what exceeded its bound.
+TX_QUEUE = 100
+
+
 class Master:
     """A passive client: SYNC every millisecond of host time from one
     thread (and, with ``sdo``, an SDO upload request to the next drive
@@ -129,6 +142,8 @@ class Master:
         self.tpdos: list[tuple[float, int]] = []
         self.error: BaseException | None = None
         self.sent = 0
+        self.heard_at = 0        # self.sent when the last record came from the bus
+        self.skipped = 0         # SYNC ticks skipped with the transmit queue full
         self.sdo = sdo
         self.lock = threading.Lock()
         self.outstanding: dict[int, SdoRead] = {}
@@ -146,10 +161,17 @@ class Master:
         tick = 0
         try:
             while not self.stop.is_set():
-                self.link.send_frame(0x080)
-                self.sent += 1
-                if self.sdo:
-                    self._sdo_request(tick)
+                # a CAN controller's transmit queue is bounded: while the bus
+                # carries nothing (QEMU paused, or its step held up by a
+                # loaded host) at most TX_QUEUE SYNCs go out, the rest are
+                # skipped as a master's SYNC producer skips on overrun
+                if self.sent - self.heard_at < TX_QUEUE:
+                    self.link.send_frame(0x080)
+                    self.sent += 1
+                    if self.sdo:
+                        self._sdo_request(tick)
+                else:
+                    self.skipped += 1
                 tick += 1
                 nxt += 0.001
                 time.sleep(max(0.0, nxt - time.monotonic()))
@@ -182,6 +204,7 @@ class Master:
                     return
                 if rec.type != canlink.FRAME:
                     continue
+                self.heard_at = self.sent
                 if rec.can_id - 0x180 in NODES:
                     self.tpdos.append((time.monotonic(), rec.can_id - 0x180))
                 elif rec.can_id - 0x580 in NODES:
@@ -442,7 +465,7 @@ def soak(tmp_path: Path, longest_s: float) -> None:
     print(f"SDO reads: {len(reads)} sent ({len(reads) / (run.master.t_stop - run.master.t_start):.0f}/s), {len(reads) - lost} answered, {len(late)} after the last pause or stall "
           f"({len(late) - len(unanswered)} answered, median {lat[len(lat) // 2] * 1000:.2f} ms, "
           f"max {lat[-1] * 1000:.2f} ms); {len(run.master.unsolicited)} unsolicited answers; "
-          f"{run.master.sent} SYNCs in {run.master.t_stop - run.master.t_start:.1f} s; "
+          f"{run.master.sent} SYNCs in {run.master.t_stop - run.master.t_start:.1f} s ({run.master.skipped} ticks skipped, queue full); "
           f"{len(run.stalls)} stalls of the host over {STALL_S * 1000:.0f} ms (longest "
           f"{max(run.stalls, default=0) * 1000:.0f} ms), the last {run.t_last_stall - run.t_last_pause:+.2f} s "
           "from the last pause")

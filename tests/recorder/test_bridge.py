@@ -416,3 +416,6 @@ def test_guest_clock_offset_from_cycle_records_and_stamps() -> None:
     # no clock rate in the HELLO: never known (frames wait, counted as lost at the end)
     c = bridge.GuestClock()
     assert not any(c.add_cycle(10**9, 0, 1000, 0) for _ in range(50)) and c.offset_ns is None
+    # a machine without servod (servoamp bridge --no-telemetry): the emulator's
+    # virtual time itself, known at once (the frames are logged, not held)
+    assert bridge.GuestClock.virtual().offset_ns == 0
