@@ -14,7 +14,8 @@
 #                  tests stay in order on one worker, each board test file
 #                  and Robot suite is a group of its own, so two QEMUs run
 #                  at once (default: SERVOAMP_TEST_JOBS, else 1).
-# Other arguments go to pytest (e.g. tests/amp_lib -k unit).
+# Other arguments go to pytest (e.g. tests/amp_lib -k unit: then only the
+# paths given run, else all of tests/).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"
@@ -34,8 +35,13 @@ done
 case $jobs in
 ''|*[!0-9]*|0) echo "test.sh: -j $jobs: expected a number of workers, 1 or more" >&2; exit 2 ;;
 esac
+# tests/ unless the arguments name test paths themselves
+paths=(tests)
+for a in ${args[@]+"${args[@]}"}; do
+	case $a in -*) ;; *) [ -e "${a%%::*}" ] && paths=() ;; esac
+done
 scripts/bootstrap.sh
 if [ "$jobs" -gt 1 ]; then
-	args=(-n "$jobs" --dist loadgroup "${args[@]}")
+	args=(-n "$jobs" --dist loadgroup ${args[@]+"${args[@]}"})
 fi
-exec .venv/bin/python -m pytest tests "${args[@]}"
+exec .venv/bin/python -m pytest ${paths[@]+"${paths[@]}"} ${args[@]+"${args[@]}"}
