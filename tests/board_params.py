@@ -9,10 +9,19 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 
 from servoamp import qemu
 
-BOARDS = ["zynq7000_qemu", "zynqmp_qemu"]
+REPO = Path(__file__).resolve().parents[1]
+
+
+def board_names() -> list[str]:
+    """Every board: the folders of boards/ with a board.yaml."""
+    return sorted(p.parent.name for p in (REPO / "boards").glob("*/board.yaml"))
+
+
+BOARDS = board_names()
 _IMAGES: dict[str, qemu.Images] = {}
 
 

@@ -35,6 +35,8 @@ sys.path.insert(0, str(REPO / "python"))
 # the test modules of every folder
 sys.path.insert(1, str(REPO / "tests"))
 
+from board_params import board_names  # noqa: E402
+
 FIRST_BOARD = "zynq7000_qemu"
 # folders whose tests all belong to one board
 BOARD_FOLDERS = {"tests/zynqmp": "zynqmp_qemu", "tests/robot/zynqmp": "zynqmp_qemu"}
@@ -43,11 +45,6 @@ BOARD_FOLDERS = {"tests/zynqmp": "zynqmp_qemu", "tests/robot/zynqmp": "zynqmp_qe
 SHARED_GROUPS = ("tests/viewer",)
 # fixtures that boot (or build the images of) one board
 BOARD_FIXTURES = {"zynqmp_images": "zynqmp_qemu", "images": FIRST_BOARD, "board": FIRST_BOARD}
-
-
-def board_names() -> list[str]:
-    """Every board: the folders of boards/ with a board.yaml."""
-    return sorted(p.parent.name for p in (REPO / "boards").glob("*/board.yaml"))
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -5,7 +5,6 @@ kernel build is not counted against a suite's timeout."""
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -13,6 +12,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "python"))
 
+from board_params import board_images  # noqa: E402
 from servoamp import qemu  # noqa: E402
 
 
@@ -23,17 +23,11 @@ def board() -> qemu.Board:
 
 @pytest.fixture(scope="session")
 def images(board: qemu.Board) -> qemu.Images:
-    t0 = time.monotonic()
-    imgs = qemu.prepare_images(board)
-    print(f"\n[board] images ready in {time.monotonic() - t0:.1f} s", file=sys.stderr)
-    return imgs
+    return board_images(board.name)[1]
 
 
 @pytest.fixture(scope="session")
 def zynqmp_images() -> qemu.Images:
     """The zynqmp_qemu board's images (TF-A, BL33 stub, the arm64 RT kernel,
     initramfs with the R5 test firmware, DTB), built or cached once."""
-    t0 = time.monotonic()
-    imgs = qemu.prepare_images(qemu.Board.load("zynqmp_qemu"))
-    print(f"\n[zynqmp] images ready in {time.monotonic() - t0:.1f} s", file=sys.stderr)
-    return imgs
+    return board_images("zynqmp_qemu")[1]

@@ -59,8 +59,9 @@ import can
 import pytest
 from mcap.reader import make_reader
 
+from board_params import BOARDS, board_images
 from can_board_faults import RESET_AXIS, RESET_BUS, RESET_CYCLES, RESET_TIMEOUT_MS, second_master, slow_fault_reset
-from servoamp import bridge, canload, netboard, qemu
+from servoamp import bridge, canload, netboard
 from servoamp.schemas import servoamp_pb2 as pb
 
 pytestmark = pytest.mark.board
@@ -68,7 +69,6 @@ pytestmark = pytest.mark.board
 REPO = Path(__file__).resolve().parents[2]
 WS_CHECK = REPO / "tools" / "mcap-verify" / "ws-check.mjs"
 PROGRAM = "/usr/share/servoamp/examples/seed004_squares_circles.nc"
-BOARDS = ["zynq7000_qemu", "zynqmp_qemu"]
 DRIVES = {0: "1,2", 1: "1,2"}          # bus -> node ids (servo-can.dts)
 AXES = 4
 PERIOD_NS = 1_000_000                  # servod's default cycle (1 kHz)
@@ -110,8 +110,7 @@ def _enabled(st: dict[str, str]) -> bool:
 @pytest.fixture(scope="module", params=BOARDS)
 def run(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     out: dict[str, Any] = {"board": request.param}
-    board = qemu.Board.load(request.param)
-    images = qemu.prepare_images(board)
+    board, images = board_images(request.param)
     assert any(f.name == "rpu_app-can.elf" for f in images.firmware), images.firmware
     cb = netboard.ControllerBoard(board, images, can_drives=DRIVES,
                                   can_log=tmp_path_factory.mktemp(f"can_board_{board.name}"))
