@@ -147,7 +147,7 @@ int main(int argc, char **argv)
 	struct telem_stats st;
 	double act[AMP_MAX_AXES] = { 0 }, prev_act[AMP_MAX_AXES] = { 0 }, prev_vel[AMP_MAX_AXES] = { 0 };
 	struct timespec next;
-	uint64_t period_ns;
+	uint64_t period_ns, t0;
 	uint32_t servo_cycle = 0, servo_ticks = 0;
 	unsigned long long sent = 0;
 	int rc;
@@ -243,6 +243,7 @@ int main(int argc, char **argv)
 	telem_push_log(&t, 0, TELEM_LOG_INFO, "rpu_app", "servoamp rpu_app (telem_feed synthetic) started", 48);
 
 	clock_gettime(CLOCK_MONOTONIC, &next);
+	t0 = (uint64_t)next.tv_sec * 1000000000u + (uint64_t)next.tv_nsec;
 	for (unsigned long long k = 0; k < o.cycles && !stop_flag; k++) {
 		unsigned long long cyc = o.start_cycle + k;
 		double tt = (double)k * (double)period_ns * 1e-9;
@@ -258,7 +259,14 @@ int main(int argc, char **argv)
 			while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &next, NULL) == EINTR && !stop_flag)
 				;
 		}
-		t_now = mono_now_ns();
+		/*
+		 * A paced cycle's time is its deadline on the controller's clock, as
+		 * a controller running at the rate would stamp it: when the host is
+		 * late, the cycle is late to the server but its time stays on the
+		 * grid (the rate the bridge works out from it is the feed's rate,
+		 * whatever the host's load). A burst has no clock but the host's.
+		 */
+		t_now = o.burst ? mono_now_ns() : t0 + (uint64_t)(k + 1) * period_ns;
 		if (o.restart_at && cyc == o.start_cycle + o.restart_at) {
 			/* the servo restarted: its counter starts again; servod marks it */
 			telem_push_gap(&t, t_now, cyc, cyc, 0, TELEM_GAP_CONTROLLER_RESTART);
