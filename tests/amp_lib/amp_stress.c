@@ -9,6 +9,9 @@
  *      every mailbox answer carries values derived from its sequence and
  *      is checked on receipt: any torn, lost, duplicated or reordered
  *      record, or wrong mailbox answer, is counted and fails the run.
+ *      Linux prints "linux: I of N cycles" (flushed) every hundredth of the
+ *      run: how long it takes depends on the host's load, so a caller
+ *      watches for progress rather than timing the whole run.
  *
  *   amp_stress watchdog [--period-us P] [--limit K] [--ticks T]
  *      A third process plays the FPGA: it raises a "cycle" every P us.
@@ -318,6 +321,7 @@ static void *linux_lockstep(void *arg)
 	uint32_t rng = seed;
 	struct wait_stats w = { 0, 0, 0 };
 	uint64_t errs = 0, every = n_mbox ? n_cycles / n_mbox : 0, mbox_done = 0;
+	uint64_t step = n_cycles >= 100u ? n_cycles / 100u : 1u;
 	int rc;
 
 	(void)arg;
@@ -370,6 +374,10 @@ static void *linux_lockstep(void *arg)
 						break;
 					}
 			mbox_done++;
+		}
+		if (i % step == 0) {	/* progress, for a watchdog on the output */
+			printf("linux: %" PRIu64 " of %" PRIu64 " cycles\n", i, n_cycles);
+			fflush(stdout);
 		}
 	}
 	/* collect the last feedback, then stop the servo */

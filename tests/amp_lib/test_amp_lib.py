@@ -5,9 +5,11 @@ footprint budget; the transport benchmark runs (figures are not judged)."""
 from __future__ import annotations
 
 import json
+import queue
 import re
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -35,6 +37,37 @@ def build_asan() -> Path:
 @pytest.fixture(scope="session")
 def build_tsan() -> Path:
     return _make("tsan", "all")
+
+
+def _run_watched(cmd: list[str], stall_s: float) -> str:
+    """Run amp_stress lockstep, which prints a progress line every hundredth of
+    its cycles, to the end however long the host's load makes it; fail if
+    it makes no progress for stall_s (a livelock or a deadlock, not a slow
+    host: a hundredth of 10M cycles takes ~3 s on a quiet core)."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: queue.Queue[str | None] = queue.Queue()
+
+    def read() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    threading.Thread(target=read, daemon=True).start()
+    out: list[str] = []
+    while True:
+        try:
+            line = lines.get(timeout=stall_s)
+        except queue.Empty:
+            proc.kill()
+            proc.wait()
+            pytest.fail(f"no progress for {stall_s:.0f} s:\n{''.join(out)}")
+        if line is None:
+            break
+        out.append(line)
+    text = "".join(out)
+    assert proc.wait() == 0, text
+    return text
 
 
 def _run(cmd: list[str], timeout: int) -> str:
@@ -85,22 +118,22 @@ def test_reattach_resynchronises_feedback(variant: str, request: pytest.FixtureR
 
 @pytest.mark.slow
 def test_stress_two_processes_10m_cycles_1m_mailbox(build_none: Path) -> None:
-    out = _run([str(build_none / "amp_stress"), "lockstep",
-                "--cycles", "10000000", "--mbox", "1000000"], timeout=1800)
+    out = _run_watched([str(build_none / "amp_stress"), "lockstep",
+                        "--cycles", "10000000", "--mbox", "1000000"], stall_s=300)
     assert "OK: 10000000 periodic exchanges and 1000000 mailbox transactions" in out
 
 
 @pytest.mark.slow
 def test_stress_two_processes_asan_ubsan(build_asan: Path) -> None:
-    out = _run([str(build_asan / "amp_stress"), "lockstep",
-                "--cycles", "1000000", "--mbox", "100000", "--seed", "99"], timeout=1200)
+    out = _run_watched([str(build_asan / "amp_stress"), "lockstep",
+                        "--cycles", "1000000", "--mbox", "100000", "--seed", "99"], stall_s=300)
     assert "OK: 1000000 periodic exchanges" in out
 
 
 @pytest.mark.slow
 def test_stress_two_threads_tsan(build_tsan: Path) -> None:
-    out = _run([str(build_tsan / "amp_stress"), "lockstep", "--threads",
-                "--cycles", "200000", "--mbox", "20000", "--seed", "7"], timeout=1200)
+    out = _run_watched([str(build_tsan / "amp_stress"), "lockstep", "--threads",
+                        "--cycles", "200000", "--mbox", "20000", "--seed", "7"], stall_s=300)
     assert "OK: 200000 periodic exchanges" in out
     assert "WARNING: ThreadSanitizer" not in out
 
