@@ -13,7 +13,8 @@ load), ``host-single`` and ``host-multi`` (guest time on the host clock,
 single- or multi-threaded TCG: figures depend on the host's load).
 
 Boots --board (zynq7000_qemu by default; zynqmp_qemu: the servo on R5 0),
-starts servod, then rpu_app through remoteproc, and runs the exchange for
+starts servod, then rpu_app through remoteproc (the instance servod
+drives, found as servod finds it: netboard.FIND_RPROC), and runs the exchange for
 --seconds at 1 ms and --short at 250 us (4 axes). Results go to
 bench/results/cycle.json for zynq7000_qemu and cycle-<board>.json for any
 other board (python/servoamp/bench.py, results_stem). Prints and stores,
@@ -74,7 +75,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO / "python"))
 
-from servoamp import qemu  # noqa: E402
+from servoamp import netboard, qemu  # noqa: E402
 from servoamp.bench import results_stem  # noqa: E402
 from servoamp.images import RPU_APP_VARIANTS  # noqa: E402
 
@@ -288,13 +289,14 @@ def start_cycle(m: qemu.QemuMachine, prompt: str) -> qemu.Uart:
     qemu.boot_to_shell(m, timeout=BOOT_TIMEOUT_S)
     c = m.uart(0)
 
-    def sh(cmd: str) -> None:
-        qemu.run_shell(c, cmd, prompt, timeout=60.0)
+    def sh(cmd: str) -> str:
+        return qemu.run_shell(c, cmd, prompt, timeout=60.0)[1]
 
     sh("dmesg -n 1")
     sh("(servod > /tmp/servod.log 2>&1 &)")
     sh("while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done")
-    sh("echo rpu_app.elf > /sys/class/remoteproc/remoteproc0/firmware; echo start > /sys/class/remoteproc/remoteproc0/state")
+    rproc = netboard.find_rproc(sh)   # as servod finds it (netboard.FIND_RPROC)
+    sh(f"echo rpu_app.elf > {rproc}/firmware; echo start > {rproc}/state")
     sh("while ! grep -q 'parameter set loaded' /tmp/servod.log; do sleep 0.05; done")
     sh("ampctl param set wd_limit 50; ampctl resume; true")
     return c

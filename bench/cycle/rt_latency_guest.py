@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from rt_latency_table import CT_PRIO, _us, parse_cyclictest, wake_summary
-from servoamp import qemu
+from servoamp import netboard, qemu
 from servoamp import telemetry as tw
 
 REPO = Path(__file__).resolve().parents[2]
@@ -309,8 +309,10 @@ def run_kernel(board: qemu.Board, kernel: str, images: qemu.Images, cycles: int,
            f"--telemetry-token {TOKEN_FILE} "
            "> /tmp/servod.log 2>&1 &)")
         sh("while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done")
-        sh("echo rpu_app.elf > /sys/class/remoteproc/remoteproc0/firmware; "
-           "echo start > /sys/class/remoteproc/remoteproc0/state")
+        # the servo core's remoteproc, found as servod finds it (the status
+        # of netboard.FIND_RPROC is its last test's: not checked)
+        rproc = netboard.find_rproc(lambda cmd: qemu.run_shell(c, cmd, prompt, timeout=60.0)[1])
+        sh(f"echo rpu_app.elf > {rproc}/firmware; echo start > {rproc}/state")
         sh("while ! grep -q 'parameter set loaded' /tmp/servod.log; do sleep 0.05; done")
         sh("ampctl param set wd_limit 50; ampctl resume; true")
         tel = Telemetry(tport, token)

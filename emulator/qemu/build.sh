@@ -131,15 +131,24 @@ publish() {
 	return 0
 }
 
+# A complete build of this key ("ok" is written last) is used as it is.
+exit_if_cached() {
+	if [ -f "$out/ok" ]; then
+		log "cached: $out ($(elapsed) s)"
+		publish
+		exit 0
+	fi
+}
+
 mkdir -p "$cache/qemu" "$srcdir"
+# Without the lock first: a caller whose key is built does not wait for
+# another key's build. The lock serialises the builds (and their prunes);
+# once it is held, the key is looked up again, since the caller it waited
+# for may have just built the same key.
+exit_if_cached
 exec 9>"$cache/qemu/.lock"
 flock 9
-
-if [ -f "$out/ok" ]; then
-	log "cached: $out ($(elapsed) s)"
-	publish
-	exit 0
-fi
+exit_if_cached
 
 # 3. The orig tarball, downloaded once through a private APT configuration.
 if [ ! -f "$srcdir/$orig" ] || ! echo "$orig_sha256  $srcdir/$orig" | sha256sum -c --status; then

@@ -59,6 +59,10 @@ FIND_RPROC = (
     "for r in /sys/class/remoteproc/remoteproc*; do "
     "[ -n \"$ph\" ] && [ \"$(od -An -tx1 $r/device/of_node/phandle 2>/dev/null | tr -d ' \\n')\" = \"$ph\" ] "
     "&& echo RPROC=$r; done")
+# Guest shell: $RPROC set to that directory in this shell (scripts that name
+# it, such as scripts/demo/guest-commands.sh: `python -m servoamp.netboard
+# --rproc-shell` prints this line); fails when no mailbox node names one.
+SET_RPROC = f'RPROC=; eval "$({FIND_RPROC})"; [ -n "$RPROC" ]'
 
 
 def servod_board_args(board: qemu.Board) -> str:
@@ -415,6 +419,11 @@ if __name__ == "__main__":
     import argparse
 
     ap = argparse.ArgumentParser(description="board facts for scripts (scripts/demo.sh)")
-    ap.add_argument("--servod-args", metavar="BOARD", required=True,
-                    help="print servod's options that name BOARD (servod_board_args)")
-    print(servod_board_args(qemu.Board.load(ap.parse_args().servod_args)))
+    what = ap.add_mutually_exclusive_group(required=True)
+    what.add_argument("--servod-args", metavar="BOARD",
+                      help="print servod's options that name BOARD (servod_board_args)")
+    what.add_argument("--rproc-shell", action="store_true",
+                      help="print the guest shell line that sets $RPROC to the servo core's "
+                           "remoteproc directory (SET_RPROC)")
+    a = ap.parse_args()
+    print(SET_RPROC if a.rproc_shell else servod_board_args(qemu.Board.load(a.servod_args)))

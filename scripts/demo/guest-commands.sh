@@ -4,19 +4,22 @@
 # the ZynqMP's R5 0 under Linux's upstream xlnx_r5_remoteproc). demo.sh
 # sets SERVOD_ARGS first: servod's options that name the board
 # (python -m servoamp.netboard --servod-args BOARD: its id and the rate of
-# the servo core's time base, board.yaml servo.clock_hz).
+# the servo core's time base, board.yaml servo.clock_hz), and RPROC: the
+# servo core's remoteproc directory, found as servod finds it (python -m
+# servoamp.netboard --rproc-shell: the remoteproc that the OCM mailbox's
+# devicetree node names).
 uname -a
-cat /sys/class/remoteproc/remoteproc0/name /sys/class/remoteproc/remoteproc0/state
+cat $RPROC/name $RPROC/state
 ls -l /lib/firmware
 # 1. servod: the cycle daemon (SCHED_FIFO thread on the cycle interrupt, through UIO)
 (servod $SERVOD_ARGS > /tmp/servod.log 2>&1 &)
 while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done
 # 2. load and start the servo firmware through the remoteproc sysfs
-echo rpu_app.elf > /sys/class/remoteproc/remoteproc0/firmware
-echo start > /sys/class/remoteproc/remoteproc0/state
-cat /sys/class/remoteproc/remoteproc0/state
+echo rpu_app.elf > $RPROC/firmware
+echo start > $RPROC/state
+cat $RPROC/state
 while ! grep -q 'parameter set loaded' /tmp/servod.log; do sleep 0.05; done
-head -n 8 /sys/kernel/debug/remoteproc/remoteproc0/trace0
+head -n 8 /sys/kernel/debug/remoteproc/${RPROC##*/}/trace0
 # 3. the cycle runs: both sides' counts, parameters
 sleep 2
 ampctl status
@@ -33,8 +36,8 @@ ampctl status
 ampctl param get pos_kp
 # 5. an operator's stop is final: servod restarts nothing and waits for a start (the A9's firmware
 #    says STOPPING and parks; the upstream driver powers R5 0 down)
-echo stop > /sys/class/remoteproc/remoteproc0/state
+echo stop > $RPROC/state
 sleep 2
-cat /sys/class/remoteproc/remoteproc0/state
+cat $RPROC/state
 tail -n 3 /tmp/servod.log
 ampctl param get pos_kp; echo "ampctl exit status $? (3 = servo not running)"
