@@ -92,10 +92,11 @@ void *cycle_thread(void *arg)
 		if (cycle_irq_wait(sd, &sd->irq, &w))
 			continue;
 		pthread_mutex_lock(&sd->lock);
+		cycle_stats_begin(&sd->pub);	/* the record and the counters: one change */
 		cycle_stats_wake(&sd->stats, &w, sd->period_ns);
 		if (session_open(&sd->session))
 			exchange(sd, cmd, &w);
-		cycle_stats_publish(&sd->stats, &sd->pub);
+		cycle_stats_end(&sd->stats, &sd->pub);
 		pthread_mutex_unlock(&sd->lock);
 	}
 	return 0;

@@ -105,11 +105,31 @@ void cycle_stats_new_session(struct cycle_stats *s)
 	s->stall_attach = UINT32_MAX;
 }
 
-void cycle_stats_publish(const struct cycle_stats *s, struct cycle_stats_pub *p)
+/* A seqcount of seq_cst accesses only (telem_cfg.app_seq): odd before any
+ * change, even after them all. */
+void cycle_stats_begin(struct cycle_stats_pub *p)
+{
+	atomic_store(&p->seq, atomic_load_explicit(&p->seq, memory_order_relaxed) + 1u);
+}
+
+void cycle_stats_end(const struct cycle_stats *s, struct cycle_stats_pub *p)
 {
 	for (unsigned i = 0; i < CYCLE_STATS_PUBLISHED; i++)
-		atomic_store_explicit(&p->v[i], *(const uint64_t *)((const char *)s + published[i].off),
-				      memory_order_relaxed);
+		atomic_store(&p->v[i], *(const uint64_t *)((const char *)s + published[i].off));
+	atomic_store(&p->seq, atomic_load_explicit(&p->seq, memory_order_relaxed) + 1u);
+}
+
+void cycle_stats_publish(const struct cycle_stats *s, struct cycle_stats_pub *p)
+{
+	cycle_stats_begin(p);
+	cycle_stats_end(s, p);
+}
+
+uint64_t cycle_stats_seq(void *pub)
+{
+	struct cycle_stats_pub *p = pub;
+
+	return atomic_load(&p->seq);
 }
 
 unsigned cycle_stats_counters(void *pub, struct telem_counter *out, unsigned max)
@@ -119,7 +139,7 @@ unsigned cycle_stats_counters(void *pub, struct telem_counter *out, unsigned max
 
 	for (; n < max && n < CYCLE_STATS_PUBLISHED; n++) {
 		snprintf(out[n].name, sizeof(out[n].name), "%s", published[n].name);
-		out[n].value = atomic_load_explicit(&p->v[n], memory_order_relaxed);
+		out[n].value = atomic_load(&p->v[n]);
 	}
 	return n;
 }

@@ -69,6 +69,10 @@ struct cycle_stats {
 enum { CYCLE_STATS_PUBLISHED = 9 };
 struct cycle_stats_pub {
 	_Atomic uint64_t v[CYCLE_STATS_PUBLISHED];
+	/* a seqcount: odd while a cycle pushes its telemetry record and the
+	 * counters change (cycle_stats_begin .. cycle_stats_end), so that the
+	 * telemetry's STATS takes them and its own totals as one snapshot */
+	_Atomic uint64_t seq;
 };
 
 /* A wake-up: count, latency, missed interval events (period_ns apart). */
@@ -88,8 +92,18 @@ int cycle_stats_peer_error(struct cycle_stats *s, int rc, uint32_t limit, uint32
 /* A new session: the next stall is reported whatever the attach count. */
 void cycle_stats_new_session(struct cycle_stats *s);
 
+/*
+ * Publishing the counters for the telemetry's drain thread. A cycle brackets
+ * everything it changes, its telemetry record included, with
+ * cycle_stats_begin() and cycle_stats_end() (which publishes);
+ * cycle_stats_publish() is both at once, for a change outside a cycle.
+ */
+void cycle_stats_begin(struct cycle_stats_pub *p);
+void cycle_stats_end(const struct cycle_stats *s, struct cycle_stats_pub *p);
 void cycle_stats_publish(const struct cycle_stats *s, struct cycle_stats_pub *p);
-/* The published counters as the telemetry's STATS application counters. */
+/* The published counters as the telemetry's STATS application counters,
+ * and their seqcount (telem_cfg.app_seq). */
 unsigned cycle_stats_counters(void *pub, struct telem_counter *out, unsigned max);
+uint64_t cycle_stats_seq(void *pub);
 
 #endif

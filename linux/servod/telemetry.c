@@ -137,6 +137,7 @@ void telemetry_start(struct servod *sd)
 	tc.drain_interval_us = 10000u;	/* 100 wake-ups/s; the ring holds 4,096 cycles */
 	tc.mlock = 1;
 	tc.app_counters = cycle_stats_counters;
+	tc.app_seq = cycle_stats_seq;
 	tc.app_arg = &sd->pub;
 	/* "param" requests (telemetry_serve) only from clients that presented
 	 * the token: without one, any local process could connect */

@@ -286,12 +286,12 @@ int telem_push_cycle(struct telem *t, const struct telem_cycle *rec)
 	uint64_t seq = t->push_seq++;
 	struct telem_slot *s;
 
-	atomic_store_explicit(&t->pushed, t->push_seq, memory_order_relaxed);
+	atomic_store_explicit(&t->pushed, t->push_seq, memory_order_seq_cst);	/* app_seq */
 	atomic_store_explicit(&t->last_cycle, rec->cycle, memory_order_relaxed);
 	s = ring_slot(&t->ring);
 	if (!s) {
 		t->drop_local++;
-		atomic_store_explicit(&t->dropped, t->drop_local, memory_order_relaxed);
+		atomic_store_explicit(&t->dropped, t->drop_local, memory_order_seq_cst);
 		return -1;
 	}
 	s->seq = seq;
@@ -407,8 +407,9 @@ int telem_push_queues(struct telem *t, uint64_t t_ns, const struct telem_queue_l
 void telem_get_stats(struct telem *t, struct telem_stats *st)
 {
 	memset(st, 0, sizeof(*st));
-	st->pushed = atomic_load_explicit(&t->pushed, memory_order_relaxed);
-	st->dropped = atomic_load_explicit(&t->dropped, memory_order_relaxed);
+	/* seq_cst: in one order with an application's seqcount (app_seq) */
+	st->pushed = atomic_load_explicit(&t->pushed, memory_order_seq_cst);
+	st->dropped = atomic_load_explicit(&t->dropped, memory_order_seq_cst);
 	st->drained = atomic_load_explicit(&t->drained, memory_order_relaxed);
 	st->events = atomic_load_explicit(&t->events, memory_order_relaxed);
 	st->events_dropped = atomic_load_explicit(&t->events_dropped, memory_order_relaxed);
@@ -976,12 +977,22 @@ static void send_stats(struct telem *t, uint32_t flags)
 	uint64_t now = mono_now_ns();
 
 	memset(ctr, 0, sizeof(ctr));
-	if (t->cfg.app_counters) {
-		nc = t->cfg.app_counters(t->cfg.app_arg, ctr, TELEM_MAX_COUNTERS);
-		if (nc > TELEM_MAX_COUNTERS)
-			nc = TELEM_MAX_COUNTERS;
+	for (unsigned tries = 1;; tries++) {
+		uint64_t seq = t->cfg.app_seq ? t->cfg.app_seq(t->cfg.app_arg) : 0;
+		struct timespec pause = { 0, 20000 };
+
+		if (t->cfg.app_counters) {
+			nc = t->cfg.app_counters(t->cfg.app_arg, ctr, TELEM_MAX_COUNTERS);
+			if (nc > TELEM_MAX_COUNTERS)
+				nc = TELEM_MAX_COUNTERS;
+		}
+		telem_get_stats(t, &st);
+		if (!t->cfg.app_seq || tries >= TELEM_SNAPSHOT_TRIES)
+			break;
+		if (!(seq & 1u) && t->cfg.app_seq(t->cfg.app_arg) == seq)
+			break;
+		nanosleep(&pause, NULL);	/* a cycle is under way: let it finish */
 	}
-	telem_get_stats(t, &st);
 	for (unsigned i = 0; i < TELEM_MAX_CLIENTS; i++) {
 		struct telem_client *c = &t->clients[i];
 		unsigned char *p;

@@ -40,6 +40,7 @@
 #define TELEM_DEFAULT_PORT 7700u
 #define TELEM_MAX_CLIENTS 8u
 #define TELEM_MAX_COUNTERS 16u
+#define TELEM_SNAPSHOT_TRIES 64u	/* STATS: reads of the app's counters for one snapshot (app_seq) */
 #define TELEM_MAX_QUEUES 8u
 #define TELEM_LOG_MAX 480u		/* bytes of text in one LOG message */
 #define TELEM_NAME_LEN 32u		/* PARAM name */
@@ -177,6 +178,17 @@ struct telem_cfg {
 	/* Called from the drain thread for each STATS message: fill up to max
 	 * application counters, return how many. May be NULL. */
 	unsigned (*app_counters)(void *arg, struct telem_counter *out, unsigned max);
+	/* Optional, with app_counters: the application's seqcount, odd while
+	 * it pushes a cycle and changes its counters, even between. Every
+	 * access is seq_cst (no fences: ThreadSanitizer has none): the
+	 * application stores the odd value, pushes and stores its counters,
+	 * stores the even value; app_counters and this load them; the pushed
+	 * and dropped totals are stored and loaded seq_cst too. With it a
+	 * STATS message's counters and its pushed/dropped totals are one
+	 * snapshot between two cycles: the drain thread reads again while the
+	 * count is odd or moved (up to TELEM_SNAPSHOT_TRIES times, 20 us
+	 * apart, then sends what it read). May be NULL. */
+	uint64_t (*app_seq)(void *arg);
 	void *app_arg;
 };
 

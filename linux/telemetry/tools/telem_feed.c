@@ -12,6 +12,7 @@
  *              [--queues-every N] [--burst] [--linger-ms MS] [--id NAME]
  *              [--client-buffer BYTES] [--stats-ms MS] [--start-cycle C]
  *              [--token STR] [--auth-ms MS] [--stall-ms MS] [--params] [--hold]
+ *              [--publish-delay-us US] [--no-snapshot]
  *
  * --params answers REQUEST frames like servod's parameter service, for one
  * parameter (pos_kp, f32 in [0, 1000] 1/s): "param list", "param get
@@ -21,6 +22,12 @@
  * Prints "listening 127.0.0.1 PORT" (flushed) when ready, and at the end one
  * JSON line: {"pushed":..,"dropped":..,"drained":..,"client_lost":..,...}.
  * --burst pushes as fast as it can (drops when the drain thread falls behind).
+ * The application counters (exchanges, stale, missed, restarts, cycles) are
+ * published as servod does, with a seqcount (telem_cfg.app_seq) around each
+ * cycle's push and counter changes, so a STATS message's "cycles" equals its
+ * pushed total; --publish-delay-us holds each cycle between its push and its
+ * counters (a slow application: the window a snapshot must not fall in), and
+ * --no-snapshot leaves app_seq out (to show what it is for).
  * SIGINT/SIGTERM end the run early (still a clean telem_stop).
  */
 #define _GNU_SOURCE
@@ -58,6 +65,8 @@ struct opts {
 	const char *token;
 	unsigned auth_ms, stall_ms;
 	int params, hold;
+	unsigned publish_delay_us;
+	int no_snapshot;
 };
 
 /* --params: servod's "param" requests (params.c) for one parameter. */
@@ -99,15 +108,29 @@ static void serve_params(struct telem *t)
 }
 
 struct app {
-	_Atomic unsigned long long exchanges, stale, missed, restarts;	/* read by the drain thread */
+	_Atomic unsigned long long exchanges, stale, missed, restarts, cycles;	/* read by the drain thread */
+	_Atomic uint64_t seq;	/* odd while a cycle is pushed and counted */
 };
+
+/* the seqcount, seq_cst like the counters (telem_cfg.app_seq) */
+static void app_bump(struct app *a)
+{
+	atomic_store(&a->seq, atomic_load_explicit(&a->seq, memory_order_relaxed) + 1u);
+}
+
+static uint64_t app_seq(void *arg)
+{
+	struct app *a = arg;
+
+	return atomic_load(&a->seq);
+}
 
 static unsigned app_counters(void *arg, struct telem_counter *out, unsigned max)
 {
 	const struct app *a = arg;
-	const char *names[] = { "exchanges", "stale", "missed", "restarts" };
-	unsigned long long v[] = { a->exchanges, a->stale, a->missed, a->restarts };
-	unsigned n = 4u < max ? 4u : max;
+	const char *names[] = { "exchanges", "stale", "missed", "restarts", "cycles" };
+	unsigned long long v[] = { a->exchanges, a->stale, a->missed, a->restarts, a->cycles };
+	unsigned n = 5u < max ? 5u : max;
 
 	for (unsigned i = 0; i < n; i++) {
 		snprintf(out[i].name, sizeof(out[i].name), "%s", names[i]);
@@ -132,15 +155,16 @@ static int usage(void)
 			"[--ring CAP] [--wait-clients K] [--wait-timeout S] [--restart-at C] "
 			"[--param-every N] [--log-every N] [--queues-every N] [--burst] "
 			"[--linger-ms MS] [--id NAME] [--client-buffer B] [--stats-ms MS] [--start-cycle C] "
-			"[--token STR] [--auth-ms MS] [--stall-ms MS] [--params] [--hold]\n");
+			"[--token STR] [--auth-ms MS] [--stall-ms MS] [--params] [--hold] "
+			"[--publish-delay-us US] [--no-snapshot]\n");
 	return 2;
 }
 
 int main(int argc, char **argv)
 {
 	struct opts o = { "127.0.0.1", "telem_feed", 0, 4, 4096, 0, 1u << 20, 500, 2000,
-			  1000.0, 10.0, 1000, 0, 0, 0, 0, 0, 0, NULL, 0, 0, 0, 0 };
-	struct app app = { 0, 0, 0, 0 };
+			  1000.0, 10.0, 1000, 0, 0, 0, 0, 0, 0, NULL, 0, 0, 0, 0, 0, 0 };
+	struct app app = { 0, 0, 0, 0, 0, 0 };
 	struct telem_cfg cfg;
 	static struct telem t;
 	struct telem_cycle rec;
@@ -165,6 +189,7 @@ int main(int argc, char **argv)
 		NUM("--linger-ms", linger_ms, (unsigned)atoi)
 		NUM("--auth-ms", auth_ms, (unsigned)atoi)
 		NUM("--stall-ms", stall_ms, (unsigned)atoi)
+		NUM("--publish-delay-us", publish_delay_us, (unsigned)atoi)
 		NUM("--rate", rate, atof)
 		NUM("--wait-timeout", wait_timeout, atof)
 		NUM("--cycles", cycles, STRTOULL)
@@ -179,9 +204,11 @@ int main(int argc, char **argv)
 		if (!strcmp(a, "--burst")) { o.burst = 1; continue; }
 		if (!strcmp(a, "--params")) { o.params = 1; continue; }
 		if (!strcmp(a, "--hold")) { o.hold = 1; continue; }
+		if (!strcmp(a, "--no-snapshot")) { o.no_snapshot = 1; continue; }
 		return usage();
 	}
-	if (o.axes < 1 || o.axes > AMP_MAX_AXES || o.rate <= 0.0 || o.port > 65535)
+	if (o.axes < 1 || o.axes > AMP_MAX_AXES || o.rate <= 0.0 || o.port > 65535 ||
+	    o.publish_delay_us > 999999u)
 		return usage();
 
 	telem_cfg_defaults(&cfg);
@@ -205,6 +232,7 @@ int main(int argc, char **argv)
 	if (o.stall_ms)
 		cfg.stall_timeout_ms = o.stall_ms;
 	cfg.app_counters = app_counters;
+	cfg.app_seq = o.no_snapshot ? NULL : app_seq;
 	cfg.app_arg = &app;
 	cfg.requests = o.params;
 	rc = telem_init(&t, &cfg);
@@ -267,6 +295,7 @@ int main(int argc, char **argv)
 		 * whatever the host's load). A burst has no clock but the host's.
 		 */
 		t_now = o.burst ? mono_now_ns() : t0 + (uint64_t)(k + 1) * period_ns;
+		app_bump(&app);	/* odd: the record and the counters are one change */
 		if (o.restart_at && cyc == o.start_cycle + o.restart_at) {
 			/* the servo restarted: its counter starts again; servod marks it */
 			telem_push_gap(&t, t_now, cyc, cyc, 0, TELEM_GAP_CONTROLLER_RESTART);
@@ -331,6 +360,13 @@ int main(int argc, char **argv)
 		}
 		telem_push_cycle(&t, &rec);
 		sent++;
+		if (o.publish_delay_us) {
+			struct timespec d = { 0, (long)o.publish_delay_us * 1000L };
+
+			nanosleep(&d, NULL);
+		}
+		app.cycles = sent;
+		app_bump(&app);	/* even */
 		if (o.params)
 			serve_params(&t);
 		if (o.param_every && k && k % o.param_every == 0) {
