@@ -313,7 +313,8 @@ class FrameSplitter:
 
 
 # ---- encoding: the server's side, for stand-in servers, tests and fuzzing ----------
-# (the producer is linux/telemetry/telem.c; these follow docs/telemetry.md)
+# (the producer is linux/telemetry/: telem_wire.c, telem_push.c, and telem_drain.c for STATS;
+# these follow docs/telemetry.md)
 
 def encode_frame(typ: int, payload: bytes, flags: int = 0) -> bytes:
     return FRAME.pack(typ, flags, len(payload)) + payload

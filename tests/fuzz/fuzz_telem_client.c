@@ -1,14 +1,14 @@
 // SPDX-License-Identifier: MIT
 /*
  * fuzz_telem_client - what a telemetry client sends, against the server's
- * own client_read() and AUTH handling (linux/telemetry/telem.c, included
- * here whole so that its static functions are the ones exercised; nothing
- * in telem.c is changed for the harness).
+ * own telem__client_read() and AUTH handling (linux/telemetry/telem_client.c,
+ * linked with the transport's other files; struct telem_client and the wire
+ * sizes from telem_internal.h; nothing in them is changed for the harness).
  *
  * Input: one flags byte (bit 0: the server has a token, bit 1: the client
  * closes its end at the end, bit 2: the client then floods 5000 more bytes),
  * then chunks [n][n bytes]: each chunk is written to the client's end of a
- * socketpair and the server reads it with client_read() (at most
+ * socketpair and the server reads it with telem__client_read() (at most
  * CLIENT_READ_MAX bytes a call, asserted, called until the socket is
  * empty or the client is gone, a bounded number of times: nothing may
  * loop forever on one client).
@@ -23,9 +23,13 @@
  * closes it; an authenticated client has the HELLO queued and one answer
  * per complete REQUEST (this server serves none: "no requests served").
  */
-#include "../../linux/telemetry/telem.c"
+#define _GNU_SOURCE
+#include "telem_internal.h"
 
+#include <string.h>
 #include <sys/ioctl.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include "fuzz_assert.h"
 
@@ -69,7 +73,7 @@ static void serve(struct telem *t, struct telem_client *c, int server_fd)
 	for (int i = 0; i < 64 && c->fd >= 0; i++) {
 		int before = fz_pending(server_fd), after;
 
-		client_read(t, c);
+		telem__client_read(t, c);
 		if (c->fd < 0)
 			return;
 		after = fz_pending(server_fd);
@@ -147,7 +151,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	if (size > sizeof(sent) / 2u)
 		return 0;
 	FZ_ASSERT(socketpair(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0, sv) == 0);
-	/* the slot as accept_clients() leaves it */
+	/* the slot as telem__accept_clients() leaves it */
 	memset(c, 0, sizeof(*c));
 	c->fd = sv[0];
 	c->buf = malloc(t->cfg.client_buffer);
@@ -204,10 +208,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 	FZ_ASSERT(c->in_len <= sizeof(c->in));
 	if (c->fd >= 0 && (flags & 2u)) {
 		shutdown(sv[1], SHUT_WR);
-		client_read(t, c);
+		telem__client_read(t, c);
 		FZ_ASSERT(c->fd < 0);	/* an end of stream closes the client */
 	}
-	client_close(t, c);
+	telem__client_close(t, c);
 	FZ_ASSERT(t->clients_now == 0);
 	close(sv[1]);
 	return 0;

@@ -1,5 +1,5 @@
 """Who may connect to the telemetry server, and that no client can block the
-others (issue 13, item 6): the real server (telem.c in telem_feed) on
+others (issue 13, item 6): the real server (libtelem.a in telem_feed) on
 127.0.0.1, with clients that never authenticate, sit idle, flood, or bring
 the wrong token. Each case failed on the server before the AUTH frame and the
 client deadlines (it streamed to anyone, kept idle connections forever,

@@ -23,6 +23,13 @@ def _servod_sources() -> list[Path]:
     return [SERVOD / n for n in names if n != "main.c"]
 
 
+def _telem_sources() -> list[Path]:
+    mk = (TOP / "linux/telemetry/sources.mk").read_text()
+    line = re.search(r"^TELEM_SOURCES :=(.*)$", mk, re.M)
+    assert line, "TELEM_SOURCES not found in linux/telemetry/sources.mk"
+    return [TOP / "linux/telemetry" / n for n in line.group(1).split()]
+
+
 def _build_and_run(tmp_path: Path, source: str, name: str, link: tuple[str, ...] = (),
                    extra: tuple[str, ...] = ()) -> str:
     motion_build = TOP / "build" / "motion"
@@ -38,7 +45,7 @@ def _build_and_run(tmp_path: Path, source: str, name: str, link: tuple[str, ...]
            *map(str, _servod_sources()),
            str(TOP / "amp_lib/src/amp_linux.c"), str(TOP / "amp_lib/src/amp_common.c"),
            str(TOP / "amp_lib/src/amp_servo.c"),
-           str(TOP / "amp_lib/src/amp_strerror.c"), str(TOP / "linux/telemetry/telem.c"),
+           str(TOP / "amp_lib/src/amp_strerror.c"), *map(str, _telem_sources()),
            str(motion_build / "host" / "libmotion.a"), "-lm", *link, "-o", str(exe)]
     subprocess.run(cmd, check=True)
     proc = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300)

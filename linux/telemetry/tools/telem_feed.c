@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 /*
  * telem_feed - the stand-in producer for host tests: the REAL telemetry ring
- * and server (telem.c) streaming N synthetic cycles at a given rate. The
+ * and server (libtelem.a) streaming N synthetic cycles at a given rate. The
  * plant: axes 0/1 follow a circle, the others sines, each through a
  * first-order lag (following error), with velocity, current, latencies and
  * exchange statuses made up in the program.
