@@ -165,14 +165,16 @@ static void op_linux_cycle(struct in *in)
 
 	memset(ax, 0x5a, sizeof(ax));
 	rc = amp_linux_cycle(&l, ax, n, u8(in), &rx);
+	/* (a servo whose state word says STOPPING: AMP_E_PEER_STOPPING, never
+	 * a stall; docs/amp-protocol.md section 3) */
 	FZ_ASSERT(rc == AMP_OK || rc == AMP_E_PEER_ABSENT || rc == AMP_E_PEER_ERROR ||
-		  rc == AMP_E_STALLED || rc == AMP_E_FEEDBACK);
+		  rc == AMP_E_STALLED || rc == AMP_E_FEEDBACK || rc == AMP_E_PEER_STOPPING);
 	check_rx(&rx, l.fb_seq);
 	/* refused reads are never AMP_OK (nor a peer error) for wd_limit
 	 * cycles: once the servo has attached, AMP_E_FEEDBACK at the latest */
 	FZ_ASSERT(l.fb_bad <= bad + 1u);
 	if (l.peer_seen && l.fb_bad >= l.wd.limit)
-		FZ_ASSERT(rc == AMP_E_STALLED || rc == AMP_E_FEEDBACK);
+		FZ_ASSERT(rc == AMP_E_STALLED || rc == AMP_E_FEEDBACK || rc == AMP_E_PEER_STOPPING);
 	if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED) {
 		/* in sequence, or the first record after an attach seen now
 		 * or earlier (any sequence, FRESH) */
@@ -217,12 +219,12 @@ static void op_linux_poll(struct in *in, int call)
 		rc = amp_linux_mbox_call(&l, &req, &resp, u8(in));
 		FZ_ASSERT(rc == AMP_OK || rc == AMP_E_PEER_ABSENT || rc == AMP_E_PEER_ERROR ||
 			  rc == AMP_E_BUSY || rc == AMP_E_TIMEOUT || rc == AMP_E_PROTO ||
-			  rc == AMP_E_NOSPC);
+			  rc == AMP_E_NOSPC || rc == AMP_E_PEER_STOPPING);
 	} else {
 		rc = amp_linux_mbox_poll(&l, &resp);
 		FZ_ASSERT(rc == AMP_OK || rc == AMP_E_PEER_ABSENT || rc == AMP_E_PEER_ERROR ||
 			  rc == AMP_E_BUSY || rc == AMP_E_PROTO || rc == AMP_E_NOSPC ||
-			  rc == AMP_E_INVAL);
+			  rc == AMP_E_INVAL || rc == AMP_E_PEER_STOPPING);
 		FZ_ASSERT(rc != AMP_E_INVAL || !l.mbox_pending);
 	}
 	if (rc == AMP_OK)
@@ -245,7 +247,7 @@ static void op_linux_post(struct in *in)
 		(void)amp_linux_mbox_cancel(&l);
 	rc = amp_linux_mbox_post(&l, &req);
 	FZ_ASSERT(rc == AMP_OK || rc == AMP_E_PEER_ABSENT || rc == AMP_E_PEER_ERROR ||
-		  rc == AMP_E_BUSY);
+		  rc == AMP_E_BUSY || rc == AMP_E_PEER_STOPPING);
 	FZ_ASSERT((rc == AMP_OK) == (l.mbox_pending == 1));
 	check_linux();
 }
@@ -255,7 +257,8 @@ static void op_linux_peer(void)
 	struct amp_peer_info pi;
 	int rc = amp_linux_peer(&l);
 
-	FZ_ASSERT(rc == AMP_OK || rc == AMP_E_PEER_ABSENT || rc == AMP_E_PEER_ERROR);
+	FZ_ASSERT(rc == AMP_OK || rc == AMP_E_PEER_ABSENT || rc == AMP_E_PEER_ERROR ||
+		  rc == AMP_E_PEER_STOPPING);
 	FZ_ASSERT(amp_linux_peer_info(&ocm, sizeof(ocm), &pi) == AMP_OK);
 	FZ_ASSERT(amp_linux_peer_info(&ocm, sizeof(ocm) - 4u, &pi) == AMP_E_INVAL);
 }
