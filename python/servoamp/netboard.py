@@ -48,6 +48,7 @@ GUEST_ADDR = "10.0.2.15/24"
 NIC_MODEL = "cadence_gem"
 SERVOD_LOG = "/tmp/servod.log"
 TOKEN_FILE = "/tmp/telemetry.token"
+WAIT_POLL_S = 0.5  # ControllerBoard.wait_status: guest seconds between two polls
 # Guest shell: the remoteproc instance of the servo core, found as servod
 # finds it (linux/servod/rproc.c): the OCM mailbox's UIO device's
 # devicetree node names it (servoamp,remoteproc, a phandle), and the
@@ -335,22 +336,27 @@ class ControllerBoard:
 
     def wait_status(self, ok: Callable[[dict[str, str]], bool], timeout: float, what: str = "",
                     raise_on_timeout: bool = True) -> dict[str, str]:
-        """Poll :meth:`status` until ``ok(status)``; the status. Paced in
-        guest time (a guest ``sleep 0.5`` between polls): with CAN drives in
-        lockstep the guest runs slower than the host clock, and polling on
-        the host clock ran ampctl several times per guest second. After
-        ``timeout`` host seconds: QemuError, or the last status if not
-        ``raise_on_timeout``."""
-        deadline = time.monotonic() + timeout
+        """Poll :meth:`status` until ``ok(status)``; the status. Paced and
+        bounded in guest time (a guest ``sleep 0.5`` between polls, at most
+        ``timeout`` guest seconds of them): with CAN drives in lockstep the
+        guest runs slower than the host's clock, the more so on a loaded
+        host, and a host-clock deadline ran out before the guest had had
+        the time (a resume after a second NMT master, under ``-j 2`` with
+        a busy process per core). A guest that stops answering fails
+        :meth:`sh`'s own timeout. Then: QemuError, or the last status if
+        not ``raise_on_timeout``."""
+        polls = 0
         while True:
             st = self.status()
             if ok(st):
                 return st
-            if time.monotonic() > deadline:
+            if polls * WAIT_POLL_S >= timeout:
                 if raise_on_timeout:
-                    raise qemu.QemuError(f"{what or 'ampctl status'}: not within {timeout:g} s: {st}")
+                    raise qemu.QemuError(f"{what or 'ampctl status'}: not within {timeout:g} s"
+                                         f" of guest time: {st}")
                 return st
-            self.sh("sleep 0.5", timeout=120)
+            self.sh(f"sleep {WAIT_POLL_S}", timeout=120)
+            polls += 1
 
     def has_report_crash(self) -> bool:
         """Whether the servo core's remoteproc driver has servoamp's
