@@ -58,6 +58,8 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "on_board(name): runs on the emulated board boards/<name> "
                                        "(selected with --board)")
+    if config.pluginmanager.hasplugin("xdist") and config.getvalue("dist") == "loadgroup":
+        config.pluginmanager.register(XdistGroupCheck(), "servoamp-xdist-group-check")
 
 
 def chosen_boards(config: pytest.Config) -> list[str]:
@@ -125,3 +127,22 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     if drop:
         config.hook.pytest_deselected(items=drop)
         items[:] = keep
+
+
+class XdistGroupCheck:
+    """With -j N, refuse to run if pytest-xdist lost the groups: its loadgroup
+    scheduler reads a test's group from a suffix its workers append to the
+    node id, and with pytest 9.2 that append has no effect (pytest-xdist
+    issue 1386). The tests would spread over the workers as if ungrouped:
+    host tests racing on build/, a board file booted once per worker.
+    Every test collected under xdist has a group (above), so a worker's
+    list without one suffix is that loss. (A class, registered by
+    pytest_configure: xdist's hooks exist only where xdist is installed.)"""
+
+    def pytest_xdist_node_collection_finished(self, node: object, ids: list[str]) -> None:
+        if ids and not any("@" in i.rsplit("]", 1)[-1] for i in ids):
+            pytest.exit(
+                f"pytest {pytest.__version__} with pytest-xdist dropped every test's xdist_group "
+                f"(e.g. {ids[0]}): -j N would run the groups apart (pytest-xdist issue 1386). "
+                "pyproject.toml pins a pytest that keeps them: run scripts/bootstrap.sh, or use -j 1",
+                returncode=pytest.ExitCode.USAGE_ERROR)
