@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from servoamp.board import REPO, Board, QemuError, _log
+from servoamp.hoststall import StallMeter
 from servoamp.images import Images, _run
 from servoamp.qmp import Qmp
 from servoamp.uart import Uart
@@ -300,6 +301,8 @@ class QemuMachine:
         self.started_at = time.monotonic()
         self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=stderr, stderr=stderr)
         stderr.close()
+        proc = self._proc
+        stall = StallMeter(lambda: (proc.pid, os.getpid()))
         try:
             for i, (ls, u) in enumerate(zip(listeners, uart_defs)):
                 try:
@@ -308,7 +311,7 @@ class QemuMachine:
                     raise QemuError(f"QEMU did not connect {u['name']}; see {self.run_dir}/qemu.stderr") from None
                 conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
                 self.uarts.append(Uart(str(u["name"]), conn, self.run_dir / f"{u['name']}.log",
-                                       on_timeout=self.dump_state))
+                                       on_timeout=self.dump_state, stall=stall))
             self._qmp = Qmp(qmp_path)
         except BaseException:
             self._failed = True

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from servoamp.board import QemuError
+from servoamp.hoststall import CAP, StallMeter
 
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b[()][A-Za-z0-9]")
 
@@ -26,11 +27,16 @@ class Uart:
     """
 
     def __init__(self, name: str, sock: socket.socket, log_path: Path,
-                 on_timeout: Callable[[str], object] | None = None) -> None:
+                 on_timeout: Callable[[str], object] | None = None,
+                 stall: StallMeter | None = None) -> None:
         self.name = name
         #: called (outside the lock) when a wait times out, before the
         #: QemuError: QemuMachine dumps both vCPUs' state there
         self.on_timeout = on_timeout
+        #: the processes the guest's output depends on (QEMU and this one):
+        #: a wait's timeout counts only the time the host let them run
+        #: (servoamp.hoststall), at most hoststall.CAP times the timeout
+        self.stall = stall
         self._sock = sock
         self._log = log_path.open("wb")
         self._buf = ""
@@ -67,7 +73,9 @@ class Uart:
             self._cond.notify_all()
 
     def _wait(self, find: Any, timeout: float, what: str) -> str:
-        deadline = time.monotonic() + timeout
+        t0 = time.monotonic()
+        mark = self.stall.mark() if self.stall is not None else None
+        held = 0.0
         with self._cond:
             while True:
                 hit = find(self._buf, self._pos)
@@ -75,17 +83,29 @@ class Uart:
                     start, end = hit
                     self._pos = end
                     return self._buf[start:end]
-                left = deadline - time.monotonic()
+                wall = time.monotonic() - t0
+                left = timeout - wall
+                if left <= 0 and self.stall is not None and wall < CAP * timeout:
+                    # the time the host held QEMU (or this reader) off does
+                    # not count: the guest had none of it
+                    held = self.stall.held_s(mark)
+                    left = min(timeout - (wall - held), CAP * timeout - wall)
                 if left <= 0 or self._closed:
                     tail = self._buf[self._pos:][-800:]
                     closed = self._closed
                     break
-                self._cond.wait(left)
-        state = "closed" if closed else f"{timeout:g} s"
+                self._cond.wait(min(left, 1.0) if self.stall is not None else left)
+        if closed:
+            state = "closed"
+        elif held > 0.05:
+            state = (f"{timeout:g} s, and {held:.1f} s more in which the host held QEMU off its CPUs: "
+                     f"{time.monotonic() - t0:.1f} s in all")
+        else:
+            state = f"{timeout:g} s"
         extra = ""
         if not closed and self.on_timeout is not None:
             try:
-                self.on_timeout(f"{self.name}: no {what} within {timeout:g} s")
+                self.on_timeout(f"{self.name}: no {what} within {state}")
             except Exception as e:  # the dump must never hide the timeout
                 extra = f"\n(vCPU state dump failed: {e})"
         raise QemuError(f"{self.name}: no {what} ({state}); unread output:\n{tail}{extra}")
