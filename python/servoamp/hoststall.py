@@ -23,6 +23,7 @@ loaded the host.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
@@ -72,3 +73,46 @@ class StallMeter:
         if not now:
             return 0.0
         return max(ns - mark.get(key, 0) for key, ns in now.items()) / 1e9
+
+
+def process_tree(root: int) -> list[int]:
+    """``root`` and all its descendants (from /proc/*/stat's parent pids)."""
+    kids: dict[int, list[int]] = {}
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{d}/stat").read_text()
+        except OSError:
+            continue
+        ppid = int(stat[stat.rindex(")") + 2:].split()[1])
+        kids.setdefault(ppid, []).append(int(d))
+    out, todo = [], [root]
+    while todo:
+        pid = todo.pop()
+        out.append(pid)
+        todo.extend(kids.get(pid, ()))
+    return out
+
+
+class Deadline:
+    """``timeout`` seconds of the time this process and its children (QEMU,
+    a browser, a feed) could run: expired once that much has passed less
+    the host's hold-offs (:class:`StallMeter`), or CAP * timeout in all."""
+
+    def __init__(self, timeout: float, meter: StallMeter | None = None) -> None:
+        self.timeout = timeout
+        self.meter = meter or StallMeter(lambda: process_tree(os.getpid()))
+        self._t0 = time.monotonic()
+        self._mark = self.meter.mark()
+
+    def expired(self) -> bool:
+        wall = time.monotonic() - self._t0
+        if wall < self.timeout:
+            return False
+        return wall >= CAP * self.timeout or wall - self.meter.held_s(self._mark) >= self.timeout
+
+    def describe(self) -> str:
+        wall = time.monotonic() - self._t0
+        return (f"{self.timeout:g} s; {wall:.1f} s in all, "
+                f"{self.meter.held_s(self._mark):.1f} s of it held off the CPUs by the host")

@@ -11,6 +11,7 @@ host); the "guest" answers on a socket after a while on the host's clock.
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import subprocess
@@ -23,9 +24,10 @@ from pathlib import Path
 import pytest
 
 from servoamp.board import QemuError
-from servoamp.hoststall import CAP, StallMeter, thread_waits
+from servoamp.hoststall import CAP, Deadline, StallMeter, thread_waits
 from servoamp.uart import Uart
 
+REPO = Path(__file__).resolve().parents[2]
 SPIN = "import os, sys; os.sched_setaffinity(0, {int(sys.argv[1])})\nwhile True: pass"
 
 
@@ -136,3 +138,41 @@ def test_the_cap_ends_a_wait_however_long_the_host_holds_off(tmp_path: Path, sta
         uart.wait_for_line("never", timeout=0.5)
     took = time.monotonic() - t0
     assert CAP * 0.5 - 0.2 < took < CAP * 0.5 + 1.5, took
+
+
+def test_a_deadline_counts_the_time_its_processes_could_run(crowded: int) -> None:
+    """hoststall.Deadline (the viewer tests' waits): held off three quarters
+    of the time, 0.5 s of running time take about 2 s."""
+    d = Deadline(0.5, StallMeter(lambda: [crowded]))
+    t0 = time.monotonic()
+    while not d.expired():
+        time.sleep(0.05)
+    assert time.monotonic() - t0 >= 1.0, d.describe()
+    quiet = Deadline(0.5, StallMeter(lambda: [os.getpid()]))
+    t0 = time.monotonic()
+    while not quiet.expired():
+        time.sleep(0.05)
+    assert time.monotonic() - t0 < 1.5, quiet.describe()
+
+
+def test_the_browser_drivers_clock_counts_the_same(tmp_path: Path) -> None:
+    """tools/viewer/hoststall.mjs (drive.mjs's timeouts): its process tree's
+    hold-offs, here four busy children on one CPU, are what runClock takes
+    off the wall time."""
+    script = tmp_path / "clock.mjs"
+    script.write_text(f"""
+import {{ spawn }} from "node:child_process";
+import {{ runClock }} from "{REPO / 'tools/viewer/hoststall.mjs'}";
+const cpu = {min(os.sched_getaffinity(0))};
+const kids = [0, 1, 2, 3].map(() => spawn({sys.executable!r}, ["-c", {SPIN!r}, String(cpu)]));
+await new Promise((r) => setTimeout(r, 300));
+const clock = runClock();
+await new Promise((r) => setTimeout(r, 1000));
+console.log(JSON.stringify({{ wall: clock.wall(), held: clock.held(), spent: clock.spent(900) }}));
+for (const k of kids) k.kill("SIGKILL");
+""")
+    res = subprocess.run(["node", str(script)], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    assert got["held"] > 0.5 * got["wall"], got
+    assert got["spent"] is False, got   # 900 ms of running time: not yet

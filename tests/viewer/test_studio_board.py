@@ -32,6 +32,7 @@ import pytest
 from board_params import BOARDS, board_images
 from recorder_helpers import TOP
 from servoamp import bridge, mcapio, netboard
+from servoamp.hoststall import Deadline
 from test_studio_live import run_driver
 
 pytestmark = pytest.mark.board
@@ -47,12 +48,12 @@ def _hang_recover_and_run(cb: netboard.ControllerBoard) -> None:
     """A restart the controller announces (the gap panel's message), then
     the G-code program (the queue levels): as a user's session would have."""
     cb.ampctl("debug hang", expected_rc=None)
-    deadline = time.monotonic() + 120  # a hang turned into a failure, no timing test
+    deadline = Deadline(120)  # a hang turned into a failure, no timing test
     while True:
         st = cb.ampctl("status", expected_rc=None)
         if "recoveries=1" in st and "recovering=0" in st and "servo_state=RUNNING" in st:
             break
-        assert time.monotonic() < deadline, f"servod did not recover:\n{st}"
+        assert not deadline.expired(), f"servod did not recover ({deadline.describe()}):\n{st}"
         time.sleep(0.2)
     cb.ampctl(f"run {PROGRAM}", expected_rc=None)
 

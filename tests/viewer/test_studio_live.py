@@ -16,7 +16,10 @@ parameters): Studio 1.48 in headless Chromium without a GPU keeps every point
 of every curve and redraws them all, and on 2 shared cores takes it in at a
 few hundred messages a second, so an endless 1 kHz stream would leave it
 ever further behind. The driver's steps wait with generous timeouts for
-every message; nothing here measures speed."""
+every message; nothing here measures speed. Every wait, the driver's and
+these, counts the time the processes could run: the host's hold-offs of
+them (other QEMUs, other load) are added, at most hoststall.CAP times the
+timeout (servoamp.hoststall, tools/viewer/hoststall.mjs)."""
 
 from __future__ import annotations
 
@@ -38,6 +41,7 @@ import pytest
 
 from recorder_helpers import TOP, Feed
 from servoamp import bridge, info, mcapio
+from servoamp.hoststall import CAP, Deadline
 from servoamp import telemetry as tw
 
 TOKEN = "viewer-test-token-0123"
@@ -50,6 +54,9 @@ OUT = TOP / "build" / "viewer"
 VIEWER = TOP / "tools" / "viewer"
 DRIVE = VIEWER / "drive.mjs"
 DRIVER_TIMEOUT_S = 240  # the whole driver, at worst (it takes about 60 s)
+# the feed's wait for the page and the second client, on the host's clock:
+# longer than the driver can take, which is what bounds it
+FEED_WAIT_S = int(CAP * DRIVER_TIMEOUT_S)
 
 
 class _Quiet(SimpleHTTPRequestHandler):
@@ -93,7 +100,8 @@ def run_driver(ws_url: str, out: Path, *, good: float, bad: float, timeout_s: in
                name: str = "host") -> tuple[dict[str, dict[str, Any]], list[str]]:
     """tools/viewer/drive.mjs on the page (tools/ served on 127.0.0.1) for
     ws_url: its events by name, on_event called with each as it comes, and
-    its stderr lines. The whole driver is killed after watchdog_s."""
+    its stderr lines. The whole driver is killed after watchdog_s of the
+    time it could run (hoststall.Deadline)."""
     http = _serve_tools()
     events: dict[str, dict[str, Any]] = {}
     err_lines: list[str] = []
@@ -110,14 +118,28 @@ def run_driver(ws_url: str, out: Path, *, good: float, bad: float, timeout_s: in
         so, se = drv.stdout, drv.stderr
         assert so is not None and se is not None
         threading.Thread(target=lambda: err_lines.extend(se), daemon=True).start()
-        watchdog = threading.Timer(watchdog_s, drv.kill)
-        watchdog.start()
-        for line in so:
-            ev = json.loads(line)
-            events[ev["event"]] = ev
-            on_event(ev)
-        drv.wait(timeout=60)
-        watchdog.cancel()
+        done = threading.Event()
+        killed: list[str] = []
+
+        def watchdog(p: subprocess.Popen[str] = drv) -> None:
+            deadline = Deadline(watchdog_s)
+            while not done.wait(1.0):
+                if deadline.expired():
+                    killed.append(deadline.describe())
+                    p.kill()
+                    return
+
+        threading.Thread(target=watchdog, daemon=True).start()
+        try:
+            for line in so:
+                ev = json.loads(line)
+                events[ev["event"]] = ev
+                on_event(ev)
+            drv.wait(timeout=60)
+        finally:
+            done.set()
+        if killed:
+            err_lines.append(f"[run_driver] the driver was killed after {killed[0]}\n")
     finally:
         if drv is not None and drv.poll() is None:
             drv.kill()
@@ -136,7 +158,7 @@ def live(feed_bin: Path, viewer_ready: None, tmp_path_factory: pytest.TempPathFa
     mcap = tmp_path_factory.mktemp("viewer") / "live.mcap"
     feed = Feed(feed_bin, "--cycles", str(CYCLES), "--hold", "--rate", str(RATE), "--axes",
                 str(AXES), "--params", "--token", TOKEN, "--wait-clients", "2",
-                "--wait-timeout", "150",
+                "--wait-timeout", str(FEED_WAIT_S),
                 "--log-every", str(RATE // 2), "--queues-every", str(RATE // 10),
                 "--restart-at", str(2 * RATE))
     b = bridge.Bridge("127.0.0.1", feed.port, token=TOKEN, ws_port=0, mcap=mcap,
@@ -154,10 +176,11 @@ def live(feed_bin: Path, viewer_ready: None, tmp_path_factory: pytest.TempPathFa
             # layout reads (Studio sends them a moment after it renders: under
             # load the first cycles went to a page not subscribed yet)
             want = _layout_topics()
-            deadline = time.monotonic() + 60
+            deadline = Deadline(60)
             while not b.subscribed(want):
-                if time.monotonic() > deadline:
-                    raise AssertionError(f"the page never subscribed to all of {sorted(want)}")
+                if deadline.expired():
+                    raise AssertionError(f"the page never subscribed to all of {sorted(want)} "
+                                         f"({deadline.describe()})")
                 time.sleep(0.05)
             _second_client(feed.port, stop)
 

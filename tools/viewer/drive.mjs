@@ -21,11 +21,17 @@
 // with their rates), studio-param-refused.png (the refused value among
 // Studio's problems). Requests to any host but 127.0.0.1 are refused
 // (listed in the result as "blocked").
+//
+// Every timeout here counts the time Chromium could run (hoststall.mjs):
+// time the host held its processes off its CPUs (other QEMUs, other load)
+// is added, at most CAP times the timeout in all.
 
 import fs from "node:fs";
 import path from "node:path";
 import { parseArgs } from "node:util";
-import { chromium } from "playwright-core";
+import { chromium, errors } from "playwright-core";
+
+import { CAP, runClock } from "./hoststall.mjs";
 
 const { values: opt } = parseArgs({
   options: {
@@ -57,14 +63,37 @@ const t0 = Date.now();
 const emit = (obj) => process.stdout.write(JSON.stringify({ t_s: (Date.now() - t0) / 1000, ...obj }) + "\n");
 const log = (msg) => process.stderr.write(`[drive ${((Date.now() - t0) / 1000).toFixed(1)}s] ${msg}\n`);
 
+/**
+ * Runs attempt(timeoutMs), a Playwright action, within budgetMs of the time
+ * Chromium could run: a Playwright timeout in which the host held Chromium
+ * off its CPUs is not the page's, and the action is tried again with what
+ * is left (an action that timed out waiting for its element did nothing).
+ */
+async function patient(what, budgetMs, attempt) {
+  const clock = runClock();
+  for (;;) {
+    const left = Math.min(budgetMs - clock.ran(), CAP * budgetMs - clock.wall());
+    try {
+      return await attempt(Math.max(left, 1000));
+    } catch (e) {
+      if (!(e instanceof errors.TimeoutError)) throw e;
+      if (clock.spent(budgetMs)) {
+        e.message = `${what}: ${e.message} (${clock.describe()})`;
+        throw e;
+      }
+      log(`${what}: timed out with Chromium held off its CPUs (${clock.describe()}): trying again`);
+    }
+  }
+}
+
 const userDataDir = fs.mkdtempSync(path.join(opt.out, "chromium-profile-"));
-const context = await chromium.launchPersistentContext(userDataDir, {
+const context = await patient("launching Chromium", 60_000, (timeout) => chromium.launchPersistentContext(userDataDir, {
   executablePath: opt.chromium,
   args: CHROMIUM_ARGS,
   viewport: { width: 1600, height: 1000 },
   acceptDownloads: true,
-  timeout: 60_000,
-});
+  timeout,
+}));
 const page = context.pages()[0] ?? (await context.newPage());
 page.setDefaultTimeout(60_000);
 
@@ -104,9 +133,10 @@ const median = (a) => {
   return b[Math.floor(b.length / 2)];
 };
 
-/** Polls fn (run in the page) until it returns a truthy value. */
+/** Polls fn (run in the page) until it returns a truthy value, for
+ * timeoutMs of the time Chromium could run. */
 async function waitFor(what, fn, arg, timeoutMs = TIMEOUT_MS) {
-  const end = Date.now() + timeoutMs;
+  const clock = runClock();
   let last;
   for (;;) {
     try {
@@ -115,7 +145,7 @@ async function waitFor(what, fn, arg, timeoutMs = TIMEOUT_MS) {
       last = { evaluateError: String(e) };
     }
     if (last && !last.evaluateError && last.ok !== false) return last;
-    if (Date.now() > end) throw new Error(`timed out waiting for ${what}: ${JSON.stringify(last)}`);
+    if (clock.spent(timeoutMs)) throw new Error(`timed out waiting for ${what} (${clock.describe()}): ${JSON.stringify(last)}`);
     await page.waitForTimeout(500);
   }
 }
@@ -178,7 +208,7 @@ const setStage = (name) => {
 };
 try {
   log(`open ${opt.page}`);
-  await page.goto(opt.page, { waitUntil: "load", timeout: 120_000 });
+  await patient("loading the page", 120_000, (timeout) => page.goto(opt.page, { waitUntil: "load", timeout }));
   const st = await waitFor("the page to render Studio", () => {
     const s = window.servoampViewer;
     if (s?.state === "failed") return { failed: s.error };
@@ -233,7 +263,8 @@ try {
   for (const id of plots) {
     const panel = page.locator(panelSel(id));
     const button = panel.locator('button[title="Download plot data as CSV"], button:has([data-testid="DownloadIcon"])').first();
-    const [download] = await Promise.all([page.waitForEvent("download", { timeout: 60_000 }), button.click()]);
+    const [download] = await patient(`${id}'s CSV`, 60_000, (timeout) =>
+      Promise.all([page.waitForEvent("download", { timeout }), button.click({ timeout })]));
     const file = path.join(opt.out, `plot-${id.replace(/[^A-Za-z0-9]+/g, "_")}.csv`);
     await download.saveAs(file);
     const lines = fs.readFileSync(file, "utf8").split("\n").filter((l) => l.length > 0);
@@ -266,8 +297,9 @@ try {
   setStage("problems");
   result.problems_before = await page.evaluate(readProblemsTab);
   result.topics = await page.evaluate(readTopics);
-  await page.screenshot({ path: path.join(opt.out, `studio-${opt.name}.png`), timeout: 60_000 });
-  await page.getByRole("tab", { name: /^Problems/ }).click();
+  await patient("the screenshot", 60_000, (timeout) =>
+    page.screenshot({ path: path.join(opt.out, `studio-${opt.name}.png`), timeout }));
+  await patient("the Problems tab", 60_000, (timeout) => page.getByRole("tab", { name: /^Problems/ }).click({ timeout }));
   result.problems_before.list = await waitFor("the problems list", () => {
     const none = [...document.querySelectorAll("p, span, div")].some((e) => e.childElementCount === 0 && e.innerText?.trim() === "No problems found");
     const items = [...document.querySelectorAll(".MuiListItemText-primary")].map((e) => e.innerText.trim());
@@ -288,8 +320,8 @@ try {
     for (let attempt = 1; ; attempt++) {
       const from = sentOps.length;
       const box = row.locator("textarea").first();
-      await box.click();
-      await box.fill(String(value));
+      await patient(`the ${opt.param} box`, 60_000, (timeout) => box.click({ timeout }));
+      await patient(`typing into the ${opt.param} box`, 60_000, (timeout) => box.fill(String(value), { timeout }));
       try {
         await row.getByRole("button", { name: "Submit change" }).click({ timeout: 5_000 });
       } catch (e) {
@@ -317,7 +349,7 @@ try {
   }
   if (opt.bad !== undefined) {
     setStage("set bad");
-    await page.getByRole("tab", { name: /^Problems/ }).click();
+    await patient("the Problems tab", 60_000, (timeout) => page.getByRole("tab", { name: /^Problems/ }).click({ timeout }));
     await setParam(opt.bad);
     const refused = await waitFor("the refusal among Studio's problems", (a) => {
       const items = [...document.querySelectorAll(".MuiListItemText-primary")].map((e) => e.innerText.trim());
@@ -331,14 +363,14 @@ try {
     const row = page.locator(panelSel("Parameters!params")).locator("tr", { hasText: opt.param }).first();
     let kept;
     let reset = false;
-    const end = Date.now() + TIMEOUT_MS;
+    const clock = runClock();
     for (;;) {
       kept = await page.evaluate(readParameters, opt.param);
       if (kept.ok && Number(kept.row.input) !== Number(opt.bad)) break;
-      if (Date.now() > end) throw new Error(`${opt.param} still shows ${opt.bad}: ${JSON.stringify(kept)}`);
+      if (clock.spent(TIMEOUT_MS)) throw new Error(`${opt.param} still shows ${opt.bad} (${clock.describe()}): ${JSON.stringify(kept)}`);
       const resetButton = row.getByRole("button", { name: "Reset" });
       if (kept.ok && await resetButton.count()) {
-        await resetButton.click();
+        await patient("the Reset button", 60_000, (timeout) => resetButton.click({ timeout }));
         reset = true;
       }
       await page.waitForTimeout(500);
@@ -346,7 +378,7 @@ try {
     const tab = await page.evaluate(readProblemsTab);
     result.set_bad = { problems: refused.items, shown_after: kept.row.input, reset, problems_tab: tab };
     const refusedShot = opt.name === "host" ? "studio-param-refused.png" : `studio-${opt.name}-param-refused.png`;
-    await page.screenshot({ path: path.join(opt.out, refusedShot), timeout: 60_000 });
+    await patient("the screenshot", 60_000, (timeout) => page.screenshot({ path: path.join(opt.out, refusedShot), timeout }));
   }
   result.params_final = await waitFor(`the ${opt.param} row`, readParameters, opt.param);
   setStage("done");
