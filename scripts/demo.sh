@@ -35,7 +35,6 @@ scripts/bootstrap.sh
 guest=$(.venv/bin/python -c 'import sys, yaml; print(yaml.safe_load(open(sys.argv[1]))["demo"]["guest_commands"])' \
 	"boards/$board/board.yaml")
 servod_args=$(PYTHONPATH=python .venv/bin/python -m servoamp.netboard --servod-args "$board")
-set_rproc=$(PYTHONPATH=python .venv/bin/python -m servoamp.netboard --rproc-shell)
 .venv/bin/python scripts/west_commands/emu.py -b "$board" --accel tcg,thread=single \
-	-c "SERVOD_ARGS='$servod_args'" -c "$set_rproc" --script "$guest" ${args[@]+"${args[@]}"}
+	-c "SERVOD_ARGS='$servod_args'" --script "$guest" ${args[@]+"${args[@]}"}
 exec scripts/demo/record.sh --board "$board" --program --can

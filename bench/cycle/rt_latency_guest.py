@@ -309,8 +309,8 @@ def run_kernel(board: qemu.Board, kernel: str, images: qemu.Images, cycles: int,
            f"--telemetry-token {TOKEN_FILE} "
            "> /tmp/servod.log 2>&1 &)")
         sh("while ! grep -q 'waiting for the servo' /tmp/servod.log; do sleep 0.05; done")
-        # the servo core's remoteproc, found as servod finds it (the status
-        # of netboard.FIND_RPROC is its last test's: not checked)
+        # the servo core's remoteproc, found by servod (netboard.FIND_RPROC;
+        # find_rproc says why when there is none)
         rproc = netboard.find_rproc(lambda cmd: qemu.run_shell(c, cmd, prompt, timeout=60.0)[1])
         sh(f"echo rpu_app.elf > {rproc}/firmware; echo start > {rproc}/state")
         sh("while ! grep -q 'parameter set loaded' /tmp/servod.log; do sleep 0.05; done")

@@ -9,6 +9,12 @@
  *          [--idle sine|hold] [--max-program-s S]
  *          [--recovery-limit K] [--recovery-window S] [--recovery-timeout S]
  *          [--recovery-backoff S] [-v]
+ *   servod --find-rproc
+ *
+ * --find-rproc prints the servo core's remoteproc directory
+ * (/sys/class/remoteproc/remoteprocN, found as servod finds it: rproc.h)
+ * and exits: 0, or 1 when there is none. Guest scripts and the tests use
+ * it instead of a fixed remoteprocN: RPROC=$(servod --find-rproc).
  *
  * Threads: the cycle thread (cycle.c, SCHED_FIFO) exchanges with the servo
  * at every cycle interrupt; the main thread runs the supervisor
@@ -53,7 +59,8 @@ static void usage(void)
 			"[--ttc-hz HZ] [--servo-clock-hz HZ] [--prio N] "
 			"[--telemetry ADDR:PORT|off] [--telemetry-token FILE] [--id NAME] [--inc-per-mm N] [--vmax MM_S] "
 			"[--amax MM_S2] [--travel MM] [--idle sine|hold] [--max-program-s S] [--recovery-limit K] "
-			"[--recovery-window S] [--recovery-timeout S] [--recovery-backoff S] [-v]\n");
+			"[--recovery-window S] [--recovery-timeout S] [--recovery-backoff S] [-v]\n"
+			"       servod --find-rproc\n");
 }
 
 /* Seconds (decimals allowed) as ms into *ms, within (0, 86400]: 0, or 1. */
@@ -238,6 +245,21 @@ static struct servod *servod_new(void)
 	return sd;
 }
 
+/* servod --find-rproc: the servo core's remoteproc directory on stdout. */
+static int find_rproc(void)
+{
+	struct rproc rp = { 0 };
+
+	if (rproc_find(&rp)) {
+		fprintf(stderr, "servod: no remoteproc for the servo core (neither the one the %s UIO "
+				"device's servoamp,remoteproc names, nor one named %s)\n",
+			RPROC_MAILBOX_UIO, RPROC_NAME);
+		return 1;
+	}
+	printf("%s\n", rp.dir);
+	return 0;
+}
+
 int main(int argc, char **argv)
 {
 	struct servod *sd = servod_new();
@@ -247,6 +269,8 @@ int main(int argc, char **argv)
 
 	if (!sd)
 		return 1;
+	if (argc == 2 && !strcmp(argv[1], "--find-rproc"))
+		return find_rproc();
 	sd->opt = default_opts;
 	sd->quit = &quit_requested;
 	sd->irq.fd = -1;

@@ -49,21 +49,12 @@ NIC_MODEL = "cadence_gem"
 SERVOD_LOG = "/tmp/servod.log"
 TOKEN_FILE = "/tmp/telemetry.token"
 WAIT_POLL_S = 0.5  # ControllerBoard.wait_status: guest seconds between two polls
-# Guest shell: the remoteproc instance of the servo core, found as servod
-# finds it (linux/servod/rproc.c): the OCM mailbox's UIO device's
-# devicetree node names it (servoamp,remoteproc, a phandle), and the
-# remoteproc whose device's node has that phandle is it. Prints
-# ``RPROC=/sys/class/remoteproc/remoteprocN``.
-FIND_RPROC = (
-    "ph=$(for f in /sys/class/uio/uio*/device/of_node/servoamp,remoteproc; do "
-    "[ -e \"$f\" ] && od -An -tx1 \"$f\"; done | tr -d ' \\n'); "
-    "for r in /sys/class/remoteproc/remoteproc*; do "
-    "[ -n \"$ph\" ] && [ \"$(od -An -tx1 $r/device/of_node/phandle 2>/dev/null | tr -d ' \\n')\" = \"$ph\" ] "
-    "&& echo RPROC=$r; done")
-# Guest shell: $RPROC set to that directory in this shell (scripts that name
-# it, such as scripts/demo/guest-commands.sh: `python -m servoamp.netboard
-# --rproc-shell` prints this line); fails when no mailbox node names one.
-SET_RPROC = f'RPROC=; eval "$({FIND_RPROC})"; [ -n "$RPROC" ]'
+# Guest shell: the servo core's remoteproc directory
+# (/sys/class/remoteproc/remoteprocN), found by servod as it finds it
+# (linux/servod/rproc.c: the remoteproc the OCM mailbox's devicetree node
+# names in servoamp,remoteproc). Guest scripts write
+# ``RPROC=$(servod --find-rproc)``, as scripts/demo/guest-commands.sh does.
+FIND_RPROC = "servod --find-rproc"
 
 
 def servod_board_args(board: qemu.Board) -> str:
@@ -79,11 +70,11 @@ def servod_board_args(board: qemu.Board) -> str:
 
 def find_rproc(sh: Callable[[str], str]) -> str:
     """The servo core's remoteproc directory in the guest (:data:`FIND_RPROC`
-    through ``sh``, a guest shell), or QemuError when no mailbox node names
-    one."""
-    found: list[str] = re.findall(r"^RPROC=(/sys/class/remoteproc/remoteproc\d+)\s*$", sh(FIND_RPROC), re.M)
+    through ``sh``, a guest shell), or QemuError when servod finds none."""
+    out = sh(f"{FIND_RPROC} 2>&1")
+    found: list[str] = re.findall(r"^(/sys/class/remoteproc/remoteproc\d+)\s*$", out, re.M)
     if len(found) != 1:
-        raise qemu.QemuError(f"the mailbox's servoamp,remoteproc names {len(found)} remoteproc instances: {found}")
+        raise qemu.QemuError(f"{FIND_RPROC} found no servo core's remoteproc: {out.strip()!r}")
     return found[0]
 
 
@@ -425,11 +416,7 @@ if __name__ == "__main__":
     import argparse
 
     ap = argparse.ArgumentParser(description="board facts for scripts (scripts/demo.sh)")
-    what = ap.add_mutually_exclusive_group(required=True)
-    what.add_argument("--servod-args", metavar="BOARD",
-                      help="print servod's options that name BOARD (servod_board_args)")
-    what.add_argument("--rproc-shell", action="store_true",
-                      help="print the guest shell line that sets $RPROC to the servo core's "
-                           "remoteproc directory (SET_RPROC)")
+    ap.add_argument("--servod-args", metavar="BOARD", required=True,
+                    help="print servod's options that name BOARD (servod_board_args)")
     a = ap.parse_args()
-    print(SET_RPROC if a.rproc_shell else servod_board_args(qemu.Board.load(a.servod_args)))
+    print(servod_board_args(qemu.Board.load(a.servod_args)))

@@ -4,11 +4,10 @@
 # the ZynqMP's R5 0 under Linux's upstream xlnx_r5_remoteproc). demo.sh
 # sets SERVOD_ARGS first: servod's options that name the board
 # (python -m servoamp.netboard --servod-args BOARD: its id and the rate of
-# the servo core's time base, board.yaml servo.clock_hz), and RPROC: the
-# servo core's remoteproc directory, found as servod finds it (python -m
-# servoamp.netboard --rproc-shell: the remoteproc that the OCM mailbox's
-# devicetree node names).
+# the servo core's time base, board.yaml servo.clock_hz).
 uname -a
+# the servo core's remoteproc: the one the OCM mailbox's devicetree node names
+RPROC=$(servod --find-rproc); echo $RPROC
 cat $RPROC/name $RPROC/state
 ls -l /lib/firmware
 # 1. servod: the cycle daemon (SCHED_FIFO thread on the cycle interrupt, through UIO)

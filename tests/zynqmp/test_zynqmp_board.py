@@ -194,10 +194,10 @@ def test_west_emu_starts_the_default_r5_firmware(board: qemu.Board, images: qemu
     """The issue's own check: ``west emu -b zynqmp_qemu -c 'echo start >
     .../state; cat .../state'`` prints ``running``: the upstream driver
     loads its default firmware name (rproc-ffe00000.r5f-fw, board.yaml
-    servo.default_firmware) and the R5's banner reaches UART1."""
-    rproc = "/sys/class/remoteproc/remoteproc0"
+    servo.default_firmware) and the R5's banner reaches UART1. The
+    remoteproc is the one servod finds (``servod --find-rproc``)."""
     res = subprocess.run([sys.executable, str(REPO / "scripts/west_commands/emu.py"), "-b", board.name, "-c",
-                          f"cat {rproc}/firmware; echo start > {rproc}/state; cat {rproc}/state"],
+                          "R=$(servod --find-rproc); cat $R/firmware; echo start > $R/state; cat $R/state"],
                          cwd=REPO, capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     out = res.stdout.splitlines()
