@@ -13,16 +13,20 @@
 #   -j N           N pytest workers (pytest-xdist, --dist loadgroup): host
 #                  tests stay in order on one worker, each board test file
 #                  and Robot suite is a group of its own, so two QEMUs run
-#                  at once (default: SERVOAMP_TEST_JOBS, else 1: one
-#                  process, no xdist). -j 2 is the faster on a quiet host
-#                  (README); with other load on the cores some host-timed
-#                  steps still time out under it (docs/status.md).
+#                  at once (default: SERVOAMP_TEST_JOBS, else 2 on a host
+#                  with 2 or more CPUs, else 1). -j 1: one process, no
+#                  xdist. The waits on a guest's console and the viewer
+#                  tests' waits count the time their processes could run
+#                  (python/servoamp/hoststall.py): other load on the cores
+#                  lengthens them instead of failing them (README,
+#                  docs/status.md).
 # Other arguments go to pytest (e.g. tests/amp_lib -k unit: then only the
 # paths given run, else all of tests/).
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"
-jobs=${SERVOAMP_TEST_JOBS:-1}
+cpus=$(nproc 2>/dev/null || echo 1)
+jobs=${SERVOAMP_TEST_JOBS:-$([ "$cpus" -ge 2 ] && echo 2 || echo 1)}
 args=()
 while [ $# -gt 0 ]; do
 	case $1 in

@@ -12,8 +12,8 @@ tests/robot/zynqmp: zynqmp_qemu); the ``zynqmp_images`` fixture; and
 otherwise, for a test marked ``board`` or using the ``images``/``board``
 fixtures, the first board, zynq7000_qemu.
 
-Two QEMUs at once (``scripts/test.sh -j 2``: pytest-xdist with
-``--dist loadgroup``; opt-in, the default stays one process): every host
+Two QEMUs at once (``scripts/test.sh``'s default ``-j 2``: pytest-xdist
+with ``--dist loadgroup``; ``-j 1`` is one process): every host
 test is in one group, run in order on one worker as before (they share
 build/ and make's outputs), with tests/viewer's board test (the viewer's
 build and browser); a board test file is a group of its own (one boot
