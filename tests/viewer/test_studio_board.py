@@ -58,6 +58,45 @@ def _hang_recover_and_run(cb: netboard.ControllerBoard) -> None:
     cb.ampctl(f"run {PROGRAM}", expected_rc=None)
 
 
+class _HeldForStudio:
+    """Keeps the guest stopped (QMP ``stop``) while ``want`` is set, except
+    while the bridge waits for the controller's answer to a parameter
+    request: Studio lists the parameters every 15 s, and a request that
+    met a stopped controller failed after the bridge's 10 s
+    ("no answer from the controller", among Studio's problems). One
+    thread does every stop and cont."""
+
+    def __init__(self, machine: Any, b: bridge.Bridge) -> None:
+        self.want = threading.Event()
+        self._done = threading.Event()
+        self._machine, self._bridge = machine, b
+        self._stopped = False
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._done.wait(0.02):
+            stop = self.want.is_set() and not self._bridge.pending
+            if stop != self._stopped:
+                (self._machine.pause if stop else self._machine.resume)()
+                self._stopped = stop
+
+    def request_while_stopped(self, text: str) -> str:
+        """A parameter request once the guest is stopped: its answer."""
+        deadline = Deadline(10)
+        while not self._stopped:
+            assert not deadline.expired(), f"the guest was not stopped ({deadline.describe()})"
+            time.sleep(0.02)
+        return str(self._bridge.request(text))
+
+    def close(self) -> None:
+        self._done.set()
+        self._thread.join(timeout=10)
+        if self._stopped:
+            self._machine.resume()
+            self._stopped = False
+
+
 @pytest.fixture(scope="module", params=BOARDS)
 def board_view(request: pytest.FixtureRequest, viewer_ready: None,
                tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
@@ -86,20 +125,20 @@ def board_view(request: pytest.FixtureRequest, viewer_ready: None,
         runner.start()
         machine = cb.machine
         assert machine is not None
-        paused = [False]
+        held = _HeldForStudio(machine, b)
 
         def on_event(ev: dict[str, Any]) -> None:
             if ev["event"] == "ready":
                 _hang_recover_and_run(cb)
             elif ev["event"] == "stage" and ev["name"] == "plots":
                 # Studio takes a live stream in slower than the guest sends
-                # it: the guest waits (QMP stop, guest time stands still)
-                # while the page's plots are read
-                machine.pause()
-                paused[0] = True
-            elif ev["event"] == "stage" and ev["name"] == "set good" and paused[0]:
-                machine.resume()
-                paused[0] = False
+                # it: the guest waits (guest time stands still) while the
+                # page's plots are read, answering parameter requests only
+                held.want.set()
+                # and a request meanwhile is answered, as Studio's are
+                out["held_answer"] = held.request_while_stopped("param get wd_limit")
+            elif ev["event"] == "stage" and ev["name"] == "set good":
+                held.want.clear()
 
         try:
             assert b.ws_url is not None
@@ -109,8 +148,7 @@ def board_view(request: pytest.FixtureRequest, viewer_ready: None,
             out["kp_after"] = cb.ampctl("param get pos_kp").strip().splitlines()[-1]
             out["stats"] = cb.stats()
         finally:
-            if paused[0]:
-                machine.resume()
+            held.close()
             stop.set()
             runner.join(timeout=30)
             b.close()
@@ -154,6 +192,8 @@ def test_every_panel_shows_the_board(board_view: dict[str, Any]) -> None:
 
 def test_parameters_panel_sets_through_servod(board_view: dict[str, Any]) -> None:
     p = board_view["page"]
+    # a request while the guest was held for Studio's plots was answered
+    assert board_view["held_answer"].strip() == "wd_limit=50 cycles", board_view["held_answer"]
     assert float(p["set_good"]["shown"]) == GOOD
     # applied by servod, and by the firmware behind it
     assert board_view["kp_after"] == f"pos_kp={GOOD} 1/s"
