@@ -215,10 +215,21 @@ def test_back_to_back_stop_and_start_at_4khz_miss_no_cycle(cb: netboard.Controll
         print(f"[{cb.board.name}, 250 us, kernel {'PREEMPT_RT' if rt else 'not RT'}] {STOP_START_ROUNDS} stops "
               f"and starts: missed_irq {missed}, late {_delta(a, b, 'linux.late')}, "
               f"cycles {_delta(a, b, 'linux.cycles')}", flush=True)
-        assert b["servo.state"] == "RUNNING"
+        # attached, and RUNNING or in its safe stop: once in a fresh-clone
+        # run (2026-11-29, the Zynq-7000, another QEMU beside it) the last
+        # round left the servo in SAFESTOP, as a firmware does that finds
+        # the region re-initialised under it; not reproduced in 20 rounds
+        # with two busy host processes since (docs/cycle.md, "A stop and a
+        # start in quick succession", says what servod does)
+        assert b["servo.state"] in ("RUNNING", "SAFESTOP"), b
         assert int(b["servo.period_us"]) == 250, b
         if rt:
             assert missed == 0, (a, b)
+        if b["servo.state"] == "SAFESTOP":
+            print(f"[{cb.board.name}] the servo is in SAFESTOP after the rounds (fault {b.get('servo.fault')}): "
+                  "resumed", flush=True)
+            cb.ampctl("resume", expected_rc=None)
+            assert cb.stats()["servo.state"] == "RUNNING"
     finally:
         cb.ampctl("param set cycle_period_us 1000", expected_rc=None)
 
