@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -127,6 +128,19 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     if drop:
         config.hook.pytest_deselected(items=drop)
         items[:] = keep
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
+    """A failed test keeps the logs of every board still running (a module
+    fixture's boot outlives the test: its run directory was removed at the
+    module's end unless the fixture itself failed)."""
+    rep = yield
+    if rep.failed:
+        from servoamp import runner
+        if runner.mark_running_failed():
+            print(f"[qemu] {item.nodeid} failed: the running boards' logs are kept", file=sys.stderr)
+    return rep
 
 
 class XdistGroupCheck:

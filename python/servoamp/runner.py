@@ -12,6 +12,7 @@ import signal
 import socket
 import subprocess
 import time
+import weakref
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +47,19 @@ def project_qemu() -> Path:
 # xilinx-zynq-a9)
 QEMU_ANY_BOARD = "qemu-system-aarch64"
 _FALLBACK_NOTED: set[str] = set()
+# the machines started and not stopped yet (mark_running_failed)
+_RUNNING: dict[int, weakref.ref[QemuMachine]] = {}
+
+
+def mark_running_failed() -> int:
+    """Keep the logs of every machine still running (a test failed while
+    they ran: tests/conftest.py calls this, so a board that a module's
+    fixture keeps for several tests keeps its logs when one of them fails);
+    how many."""
+    machines = [m for m in (r() for r in list(_RUNNING.values())) if m is not None]
+    for m in machines:
+        m.mark_failed()
+    return len(machines)
 
 
 def check_qemu(board: Board) -> str:
@@ -300,6 +314,7 @@ class QemuMachine:
         stderr = (self.run_dir / "qemu.stderr").open("wb")
         self.started_at = time.monotonic()
         self._proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=stderr, stderr=stderr)
+        _RUNNING[id(self)] = weakref.ref(self)
         stderr.close()
         proc = self._proc
         stall = StallMeter(lambda: (proc.pid, os.getpid()))
@@ -402,6 +417,7 @@ class QemuMachine:
     def stop(self, timeout: float = 5.0) -> int | None:
         """Quit QEMU (QMP quit, then SIGTERM, then SIGKILL), close the UARTs,
         and remove the run directory unless something failed or keep_logs."""
+        _RUNNING.pop(id(self), None)
         rc: int | None = None
         if self._proc is not None:
             if self._proc.poll() is None and self._qmp is not None:
