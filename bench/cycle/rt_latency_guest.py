@@ -231,7 +231,10 @@ def window(sh: Callable[..., str], tel: Telemetry, nport: int, load: str, cycles
     if sender:
         sender.stop_ev.set()
         sender.join(5)
-        sh("killall nc sleep 2>/dev/null; true")
+        # the sink's job, its process group (the console's shell has job
+        # control): not `killall nc sleep`, after which the shell once ended
+        # the rest of its command line (a 100,000-cycle run, 2026-11-29)
+        sh("p=$(cat /tmp/sink.pid); kill -TERM -$p 2>/dev/null; wait $p 2>/dev/null; true")
     if LOADS[load]:
         sh("kill $(cat /tmp/load.pids); rm -f /tmp/load.pids; sleep 0.2; killall hackbench 2>/dev/null; true")
 
