@@ -25,8 +25,8 @@
 set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"
-cpus=$(nproc 2>/dev/null || echo 1)
-jobs=${SERVOAMP_TEST_JOBS:-$([ "$cpus" -ge 2 ] && echo 2 || echo 1)}
+ncpu=$(nproc 2>/dev/null || echo 1)
+jobs=${SERVOAMP_TEST_JOBS:-$((ncpu >= 2 ? 2 : 1))}
 args=()
 while [ $# -gt 0 ]; do
 	case $1 in

@@ -75,6 +75,10 @@ class StallMeter:
         return max(ns - mark.get(key, 0) for key, ns in now.items()) / 1e9
 
 
+#: a meter of no process: a Deadline on the host's clock alone
+NO_STALL = StallMeter(lambda: ())
+
+
 def process_tree(root: int) -> list[int]:
     """``root`` and all its descendants (from /proc/*/stat's parent pids)."""
     kids: dict[int, list[int]] = {}
@@ -96,9 +100,11 @@ def process_tree(root: int) -> list[int]:
 
 
 class Deadline:
-    """``timeout`` seconds of the time this process and its children (QEMU,
-    a browser, a feed) could run: expired once that much has passed less
-    the host's hold-offs (:class:`StallMeter`), or CAP * timeout in all."""
+    """``timeout`` seconds of the time the processes of ``meter`` could run
+    (default: this process and its children: QEMU, a browser, a feed):
+    expired once that much has passed less the host's hold-offs
+    (:class:`StallMeter`), or CAP * timeout in all. The one form of that
+    rule: the console's waits (:class:`servoamp.uart.Uart`) use it too."""
 
     def __init__(self, timeout: float, meter: StallMeter | None = None) -> None:
         self.timeout = timeout
@@ -106,13 +112,28 @@ class Deadline:
         self._t0 = time.monotonic()
         self._mark = self.meter.mark()
 
-    def expired(self) -> bool:
-        wall = time.monotonic() - self._t0
+    def wall(self) -> float:
+        """Seconds on the host's clock since the deadline was set."""
+        return time.monotonic() - self._t0
+
+    def held(self) -> float:
+        """Seconds the host held the meter's processes off since then."""
+        return self.meter.held_s(self._mark)
+
+    def left(self) -> float:
+        """Seconds on the host's clock before it can expire; 0 once it has.
+        The hold-offs are read only once the timeout has passed on the
+        host's clock."""
+        wall = self.wall()
         if wall < self.timeout:
-            return False
-        return wall >= CAP * self.timeout or wall - self.meter.held_s(self._mark) >= self.timeout
+            return self.timeout - wall
+        if wall >= CAP * self.timeout:
+            return 0.0
+        return max(0.0, min(self.timeout - (wall - self.held()), CAP * self.timeout - wall))
+
+    def expired(self) -> bool:
+        return self.left() <= 0.0
 
     def describe(self) -> str:
-        wall = time.monotonic() - self._t0
-        return (f"{self.timeout:g} s; {wall:.1f} s in all, "
-                f"{self.meter.held_s(self._mark):.1f} s of it held off the CPUs by the host")
+        return (f"{self.timeout:g} s; {self.wall():.1f} s in all, "
+                f"{self.held():.1f} s of it held off the CPUs by the host")

@@ -7,13 +7,12 @@ from __future__ import annotations
 import re
 import socket
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from servoamp.board import QemuError
-from servoamp.hoststall import CAP, StallMeter
+from servoamp.hoststall import NO_STALL, Deadline, StallMeter
 
 ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b[()][A-Za-z0-9]")
 
@@ -73,9 +72,9 @@ class Uart:
             self._cond.notify_all()
 
     def _wait(self, find: Any, timeout: float, what: str) -> str:
-        t0 = time.monotonic()
-        mark = self.stall.mark() if self.stall is not None else None
-        held = 0.0
+        # the time the host held QEMU (or this reader) off does not count:
+        # the guest had none of it
+        deadline = Deadline(timeout, self.stall or NO_STALL)
         with self._cond:
             while True:
                 hit = find(self._buf, self._pos)
@@ -83,23 +82,18 @@ class Uart:
                     start, end = hit
                     self._pos = end
                     return self._buf[start:end]
-                wall = time.monotonic() - t0
-                left = timeout - wall
-                if left <= 0 and self.stall is not None and wall < CAP * timeout:
-                    # the time the host held QEMU (or this reader) off does
-                    # not count: the guest had none of it
-                    held = self.stall.held_s(mark)
-                    left = min(timeout - (wall - held), CAP * timeout - wall)
+                left = deadline.left()
                 if left <= 0 or self._closed:
                     tail = self._buf[self._pos:][-800:]
                     closed = self._closed
                     break
-                self._cond.wait(min(left, 1.0) if self.stall is not None else left)
+                self._cond.wait(min(left, 1.0))
+        held = 0.0 if closed else deadline.held()
         if closed:
             state = "closed"
         elif held > 0.05:
             state = (f"{timeout:g} s, and {held:.1f} s more in which the host held QEMU off its CPUs: "
-                     f"{time.monotonic() - t0:.1f} s in all")
+                     f"{deadline.wall():.1f} s in all")
         else:
             state = f"{timeout:g} s"
         extra = ""

@@ -31,7 +31,7 @@ import path from "node:path";
 import { parseArgs } from "node:util";
 import { chromium, errors } from "playwright-core";
 
-import { CAP, runClock } from "./hoststall.mjs";
+import { runClock } from "./hoststall.mjs";
 
 const { values: opt } = parseArgs({
   options: {
@@ -72,9 +72,8 @@ const log = (msg) => process.stderr.write(`[drive ${((Date.now() - t0) / 1000).t
 async function patient(what, budgetMs, attempt) {
   const clock = runClock();
   for (;;) {
-    const left = Math.min(budgetMs - clock.ran(), CAP * budgetMs - clock.wall());
     try {
-      return await attempt(Math.max(left, 1000));
+      return await attempt(Math.max(clock.left(budgetMs), 1000));
     } catch (e) {
       if (!(e instanceof errors.TimeoutError)) throw e;
       if (clock.spent(budgetMs)) {

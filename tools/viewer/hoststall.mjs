@@ -61,20 +61,25 @@ export function heldMs(mark) {
   return max / 1e6;
 }
 
-/** A clock of the time the page could run: ran() = wall - held, both ms. */
+/** A clock of the time the page could run (python/servoamp/hoststall.py's
+ * Deadline): wall and held time since it was made, in ms. */
 export function runClock() {
   const start = Date.now();
   const mark = stallMark();
   return {
     wall: () => Date.now() - start,
     held: () => heldMs(mark),
-    ran() {
-      return this.wall() - this.held();
-    },
-    /** true once budgetMs of running time, or CAP * budgetMs in all, are spent */
-    spent(budgetMs) {
+    /** ms on the host's clock before budgetMs of running time, or
+     * CAP * budgetMs in all, are spent; 0 once they are (the hold-offs are
+     * read only once budgetMs have passed on the host's clock) */
+    left(budgetMs) {
       const wall = this.wall();
-      return wall >= CAP * budgetMs || wall - this.held() >= budgetMs;
+      if (wall < budgetMs) return budgetMs - wall;
+      if (wall >= CAP * budgetMs) return 0;
+      return Math.max(0, Math.min(budgetMs - (wall - this.held()), CAP * budgetMs - wall));
+    },
+    spent(budgetMs) {
+      return this.left(budgetMs) <= 0;
     },
     describe() {
       return `${(this.wall() / 1000).toFixed(1)} s in all, ${(this.held() / 1000).toFixed(1)} s of it with Chromium held off its CPUs`;
