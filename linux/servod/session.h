@@ -4,7 +4,9 @@
  * with the servo (docs/cycle.md, "The session").
  *
  *   CLOSED      no region of ours: amp_linux_init() waits until remoteproc
- *               says the servo is offline (start, or after a stop)
+ *               says the servo is offline (start, or after a stop), or
+ *               says it runs again after servod closed its own region
+ *               (a firmware started since waits for a region)
  *   OPEN        region initialised (a new epoch), the servo not yet seen
  *               running by remoteproc
  *   RUNNING     remoteproc has said "running" in this session
@@ -60,6 +62,14 @@ struct session {
 	uint32_t resend_tries;		/* failed tries since params_resend was set */
 	uint64_t resend_ns;		/* the last try (mono_now_ns) */
 	int waiting_logged;		/* CLOSED: "waiting until it is offline" said once */
+	int region_closed;		/* CLOSED: servod closed its own region when the
+					 * servo stopped (close_session()) */
+	/* RUNNING, remoteproc "offline": an attach not yet loaded, as last
+	 * seen (supervisor.c, start_under_way()) */
+	uint32_t uw_attach, uw_hb;	/* its attach_count and heartbeat */
+	uint64_t uw_seen_ns;		/* mono_now_ns: first seen */
+	uint64_t uw_still_ns;		/* its heartbeat last moved */
+	int uw_logged;			/* "a start under way" said for it */
 	atomic_int stall_pending;	/* the cycle thread saw a stall: report it (enum stall_why) */
 };
 

@@ -2,8 +2,9 @@
 /*
  * supervisor.c - the supervisor (main thread, every pass of the main loop):
  * follows remoteproc's view of the servo through the session state machine
- * (session.h), initialises the region only while the servo is offline,
- * reports a stall the cycle thread saw to remoteproc (report_crash, where
+ * (session.h), initialises the region while the servo is offline (or
+ * runs again after servod closed its region), closes it when the servo
+ * stops, reports a stall the cycle thread saw to remoteproc (report_crash, where
  * the driver has it; the upstream R5 driver has not: the stall is then
  * servod's own record) and restarts the firmware itself through
  * remoteproc's state (stop, start), within the bounds of recovery.h: a
@@ -24,46 +25,80 @@
 #define CRASH_WAIT_MS 1000u
 
 /*
- * CLOSED, remoteproc says running: started again before servod initialised
- * a new region (a stop and a start in quick succession, between two passes
- * of the supervisor). A firmware that attached to the region servod made
- * (its epoch, a sane state) is servod's: the session opens on that region
- * as it is, and the new attach gets its parameter set. Anything else is
- * not servod's to touch until it is offline. 1 if reopened.
+ * remoteproc's "offline" lags a start: the state says "running" once the
+ * driver's start op returns, and the firmware may attach before that (the
+ * Zynq-7000's driver waits for the firmware's RUN!, which it writes just
+ * before its first attach). An attach in this epoch that servod has not
+ * loaded yet, RUNNING, whose heartbeat moved within LINE_STILL_MS (over two
+ * of the longest cycle period, 10 ms), is such a start: the session goes
+ * on. Not for longer than START_UNDER_WAY_MS: a firmware that beats while
+ * remoteproc says "offline" for that long is no start.
  */
-static int reopen_session(struct servod *sd, const char *rs)
+#define LINE_STILL_MS		25u
+#define START_UNDER_WAY_MS	2000u
+
+/* Under sd->lock: 1 if the servo line shows a start under way. */
+static int start_under_way(struct servod *sd, uint64_t now)
 {
 	struct session *ss = &sd->session;
 	struct amp_peer_info pi = { 0 };
 
-	if (!ss->epoch || strcmp(rs, "running"))
-		return 0;
-	pthread_mutex_lock(&sd->lock);
 	(void)amp_linux_peer_info((const void *)sd->ocm, sd->ocm_size, &pi);
-	if (pi.epoch != ss->epoch || pi.attach_count == 0 ||
-	    (pi.state != AMP_SSTATE_RUNNING && pi.state != AMP_SSTATE_SAFESTOP)) {
+	if (pi.epoch != ss->epoch || pi.state != AMP_SSTATE_RUNNING || pi.attach_count == ss->restored_attach)
+		return 0;
+	if (pi.attach_count != ss->uw_attach) {
+		ss->uw_attach = pi.attach_count;
+		ss->uw_seen_ns = now;
+		ss->uw_logged = 0;
+	} else if (pi.heartbeat == ss->uw_hb) {
+		return now - ss->uw_still_ns < LINE_STILL_MS * 1000000ull;
+	}
+	ss->uw_hb = pi.heartbeat;
+	ss->uw_still_ns = now;
+	return now - ss->uw_seen_ns < START_UNDER_WAY_MS * 1000000ull;
+}
+
+/*
+ * The servo stopped (remoteproc "offline"; or offline while a restart
+ * waited): the session closes, and so does its region (the Linux line says
+ * STOPPED). A firmware started before servod's next pass then waits for a
+ * new region instead of attaching to this one, where Linux no longer beats:
+ * its watchdog would take it to its safe stop (LINUX_STALL) within wd_limit
+ * cycles, before servod could take it back (12 of 150 stops and starts in
+ * one shell line at 4 kHz on the Zynq-7000). Unless the new firmware has
+ * attached already (start_under_way()): 0 then, the session goes on.
+ */
+static int close_session(struct servod *sd, enum session_event ev)
+{
+	struct session *ss = &sd->session;
+
+	pthread_mutex_lock(&sd->lock);
+	if (ev == SEV_SEEN_OFFLINE && start_under_way(sd, mono_now_ns())) {
 		pthread_mutex_unlock(&sd->lock);
 		return 0;
 	}
-	session_event(ss, SEV_REGION_READY);
-	atomic_store(&ss->stall_pending, 0);
-	cycle_stats_new_session(&sd->stats);
+	session_event(ss, ev);
+	if (ss->state == SESSION_CLOSED) {
+		amp_linux_close(&sd->amp);
+		ss->region_closed = 1;
+	}
 	pthread_mutex_unlock(&sd->lock);
-	logm(sd, "servo started again before servod saw it offline: attached to this servod's region "
-		 "(epoch %u, attach_count %u): session reopened", pi.epoch, pi.attach_count);
-	ss->waiting_logged = 0;
 	return 1;
 }
 
-/* CLOSED: a new region (epoch) once remoteproc says the servo is offline. */
+/*
+ * CLOSED: a new region (epoch) once remoteproc says the servo is offline,
+ * or says it runs again after servod closed its own region (a stop and a
+ * start between two passes: that firmware waits for a region, it cannot
+ * attach to a closed one). Anything else running is not servod's to touch
+ * until it is offline.
+ */
 static void open_session(struct servod *sd, const char *rs)
 {
 	struct session *ss = &sd->session;
-	int rc;
+	int offline = !strcmp(rs, "offline"), rc;
 
-	if (strcmp(rs, "offline")) {
-		if (reopen_session(sd, rs))
-			return;
+	if (!offline && !(ss->region_closed && !strcmp(rs, "running"))) {
 		if (!ss->waiting_logged) {
 			logm(sd, "servo %s but not attached to this servod: waiting until it is offline", rs);
 			ss->waiting_logged = 1;
@@ -76,6 +111,7 @@ static void open_session(struct servod *sd, const char *rs)
 		session_event(ss, SEV_REGION_READY);
 		ss->epoch = sd->amp.epoch;
 		ss->restored_attach = 0;
+		ss->region_closed = 0;
 		/* a stall the cycle thread saw in the session before (the
 		 * operator's stop came first) is not the next firmware's */
 		atomic_store(&ss->stall_pending, 0);
@@ -83,7 +119,8 @@ static void open_session(struct servod *sd, const char *rs)
 	}
 	pthread_mutex_unlock(&sd->lock);
 	if (rc == AMP_OK)
-		logm(sd, "servo offline: region initialised, epoch %u, wd_limit %u; waiting for the servo", ss->epoch,
+		logm(sd, "servo %s: region initialised, epoch %u, wd_limit %u; waiting for the servo",
+		     offline ? "offline" : "started again before servod made a new region", ss->epoch,
 		     sd->pset[SP_P_wd_limit]);
 	else
 		logm(sd, "amp_linux_init: %s", amp_strerror(rc));
@@ -361,7 +398,7 @@ static int stopped_while_recovering(struct servod *sd, const char *rs)
 	logm(sd, "servo stopped through remoteproc during recovery (restart %u, %s): recovery abandoned, "
 		 "not restarted", r->restart, recovery_phase_name(r->phase));
 	recovery_over(r);
-	event_locked(sd, SEV_STOPPED);
+	(void)close_session(sd, SEV_STOPPED);
 	return 1;
 }
 
@@ -505,8 +542,14 @@ void supervise(struct servod *sd)
 	if (!strcmp(rs, "offline") && ss->state == SESSION_RUNNING) {
 		int stopping = servo_says_stopping(sd, &pi);
 
-		event_locked(sd, SEV_SEEN_OFFLINE);
-		logm(sd, "servo went offline%s", stopping ? " (stopped on request: its last state word is STOPPING)" : "");
+		if (close_session(sd, SEV_SEEN_OFFLINE)) {
+			logm(sd, "servo went offline%s",
+			     stopping ? " (stopped on request: its last state word is STOPPING)" : "");
+		} else if (!ss->uw_logged) {
+			logm(sd, "servo offline but attached again to this servod's region (attach_count %u): "
+				 "a start under way, the session goes on", ss->uw_attach);
+			ss->uw_logged = 1;
+		}
 		return;
 	}
 	why = atomic_exchange(&ss->stall_pending, 0);

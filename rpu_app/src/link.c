@@ -14,7 +14,9 @@
  * AMP_E_STALLED (Linux heartbeat still for wd_limit cycles) or
  * AMP_E_PEER_ABSENT (Linux closed / re-initialised the region): every axis
  * is brought to a controlled stop and the servo line says SAFESTOP with
- * the reason; it stays so until SP_CMD_RESUME.
+ * the reason; it stays so until SP_CMD_RESUME. A region closed or made
+ * anew before Linux's first command in the attach is attached again,
+ * without a safe stop: nothing was commanded to stop.
  *
  * Background loop (link_poll): attach / re-attach (retried every
  * BOARD_ATTACH_RETRY_CYCLES cycles), and the parameter service polled from
@@ -94,6 +96,10 @@ const char *link_backend(void)
 
 static struct amp_servo amp;
 static volatile int attached;
+/* Linux's first command in this attach taken; attaches ended before one
+ * (the region closed or made anew under it), and how many were logged */
+static volatile uint32_t commanded, uncommanded_ends;
+static uint32_t uncommanded_logged;
 static volatile uint32_t local_hb, hang, crash_req, linux_cycle, bad_answer, fault_req, stack_req;
 static uint32_t next_try, stack_pending, irq_abort_pending;
 static int last_err;
@@ -124,6 +130,7 @@ volatile struct link_debug link_debug;
 void link_init(void)
 {
 	attached = 0;
+	commanded = uncommanded_ends = uncommanded_logged = 0;
 	local_hb = hang = crash_req = linux_cycle = bad_answer = fault_req = stack_req = 0;
 	stack_pending = irq_abort_pending = 0;
 	next_try = 0;
@@ -191,15 +198,25 @@ void link_cycle(uint32_t t_entry, uint32_t lat_ns)
 		enter_safestop(SP_FAULT_LINUX_STALL, 1);
 	} else if (rc == AMP_E_PEER_ABSENT) {
 		/* Linux closed the region (same epoch): say why in the servo
-		 * line; re-initialised (new epoch): the line is Linux's again. */
-		enter_safestop(SP_FAULT_LINUX_GONE,
-			       mmio_read32((uintptr_t)&amp.ocm->hdr.epoch) == amp.epoch);
+		 * line; re-initialised (new epoch): the line is Linux's again.
+		 * Before Linux's first command in this attach there is nothing
+		 * to stop (the axes are as the boot or an earlier safe stop
+		 * left them): the attach met Linux closing the region or making
+		 * a new one (servod after a stop: docs/cycle.md, "A stop and a
+		 * start in quick succession"), and is simply made again. */
+		if (commanded)
+			enter_safestop(SP_FAULT_LINUX_GONE,
+				       mmio_read32((uintptr_t)&amp.ocm->hdr.epoch) == amp.epoch);
+		else
+			uncommanded_ends++;
 		attached = 0;
 		(void)app_cycle(0, 0, fb);
 		return;
 	}
-	if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED)
+	if (rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED) {
 		linux_cycle = amp.cmd.cycle;
+		commanded = 1;
+	}
 	n = app_cycle(&amp.cmd, rx.status == AMP_RX_FRESH || rx.status == AMP_RX_MISSED, fb);
 	if (was_ss && !app_in_safestop())
 		amp_servo_set_state(&amp, AMP_SSTATE_RUNNING, 0);	/* resumed */
@@ -524,6 +541,11 @@ void link_poll(uint32_t cycle, const struct link_stats *ls)
 		}
 		return;
 	}
+	if (uncommanded_ends != uncommanded_logged) {
+		uncommanded_logged = uncommanded_ends;
+		log_printf("link: the region was closed or made anew before Linux's first command in this attach "
+			   "(%u times): attaching again, no safe stop\n", (unsigned)uncommanded_logged);
+	}
 	if ((int32_t)(cycle - next_try) < 0)
 		return;
 	next_try = cycle + BOARD_ATTACH_RETRY_CYCLES;
@@ -537,6 +559,7 @@ void link_poll(uint32_t cycle, const struct link_stats *ls)
 			app_param_apply(SP_P_wd_limit, amp.wd.limit);
 		if (app_in_safestop())
 			amp_servo_set_state(&amp, AMP_SSTATE_SAFESTOP, app_fault());
+		commanded = 0;
 		compiler_barrier();
 		attached = 1;
 		log_printf("link: attached to amp_lib region %p epoch %u attach_count %u (cycle %u)\n",

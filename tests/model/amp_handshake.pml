@@ -770,10 +770,13 @@ end_loop:
 				if
 				:: !valid ->
 					/* AMP_E_PEER_ABSENT; link.c: enter_safestop writes
-					 * SAFESTOP in the line if the epoch is still ours */
+					 * SAFESTOP in the line if the epoch is still ours,
+					 * once Linux's first command in the attach was
+					 * taken (before it: nothing written, attach again):
+					 * either, here */
 					d_step { bb = hdr_epoch };
 					if
-					:: bb == se -> s_state = S_SAFESTOP
+					:: bb == se -> if :: s_state = S_SAFESTOP :: skip fi
 					:: else
 					fi;
 					d_step { att = 0; bb = 0 }

@@ -206,30 +206,34 @@ def test_back_to_back_stop_and_start_at_4khz_miss_no_cycle(cb: netboard.Controll
         cb.ampctl("param set cycle_period_us 250")
         cb.sh("sleep 0.5")
         a = cb.stats()
-        for _ in range(STOP_START_ROUNDS):
+        regions0 = _count(cb, "region initialised")
+        not_running = []
+        for i in range(STOP_START_ROUNDS):
             n = _count(cb, "parameter set loaded")
             _then_wait(cb, "echo stop > $R/state; echo start > $R/state", "parameter set loaded", n + 1)
+            st = cb.stats()
+            if st["servo.state"] != "RUNNING":
+                not_running.append(f"round {i}: {st['servo.state']} (fault {st.get('servo.fault')})")
+                cb.ampctl("resume", expected_rc=None)
         cb.sh("sleep 0.5")
         b = cb.stats()
         missed = _delta(a, b, "linux.missed_irq")
         print(f"[{cb.board.name}, 250 us, kernel {'PREEMPT_RT' if rt else 'not RT'}] {STOP_START_ROUNDS} stops "
               f"and starts: missed_irq {missed}, late {_delta(a, b, 'linux.late')}, "
-              f"cycles {_delta(a, b, 'linux.cycles')}", flush=True)
-        # attached, and RUNNING or in its safe stop: once in a fresh-clone
-        # run (2026-11-29, the Zynq-7000, another QEMU beside it) the last
-        # round left the servo in SAFESTOP, as a firmware does that finds
-        # the region re-initialised under it; not reproduced in 20 rounds
-        # with two busy host processes since (docs/cycle.md, "A stop and a
-        # start in quick succession", says what servod does)
-        assert b["servo.state"] in ("RUNNING", "SAFESTOP"), b
+              f"cycles {_delta(a, b, 'linux.cycles')}; servod saw offline and made a new region in "
+              f"{_count(cb, 'region initialised') - regions0} rounds", flush=True)
+        # RUNNING: before, a round in which servod saw "offline" left the
+        # new firmware on servod's old region, where Linux no longer beat,
+        # and its watchdog stopped the axes (SAFESTOP, LINUX_STALL) before
+        # servod took it back: 12 of 150 rounds here on the Zynq-7000.
+        # servod closes its region with the session now (docs/cycle.md,
+        # "A stop and a start in quick succession").
+        assert not not_running and b["servo.state"] == "RUNNING", (
+            f"servo not RUNNING after {len(not_running)} of {STOP_START_ROUNDS} rounds: {not_running}; "
+            f"now {b['servo.state']}:\n" + cb.sh(f"tail -n 40 {LOG}", expected_rc=None))
         assert int(b["servo.period_us"]) == 250, b
         if rt:
             assert missed == 0, (a, b)
-        if b["servo.state"] == "SAFESTOP":
-            print(f"[{cb.board.name}] the servo is in SAFESTOP after the rounds (fault {b.get('servo.fault')}): "
-                  "resumed", flush=True)
-            cb.ampctl("resume", expected_rc=None)
-            assert cb.stats()["servo.state"] == "RUNNING"
     finally:
         cb.ampctl("param set cycle_period_us 1000", expected_rc=None)
 

@@ -61,11 +61,12 @@ void rfile(const char *dir, const char *name, char *buf, size_t n)
 		buf[0] = 0;
 }
 
-/* The firmware attaches (a start) / stops (parked: its line left as it is). */
+/* The firmware attaches (a start; refused: again every cycle) / stops
+ * (parked: its line left as it is). */
 void fw_start(void)
 {
 	pthread_mutex_lock(&g.fw);
-	CHECK_EQ(amp_servo_attach(&g.s, ocm, sizeof(ocm)), AMP_OK);
+	g.attach_retry = amp_servo_attach(&g.s, ocm, sizeof(ocm)) != AMP_OK;
 	g.running = 1;
 	g.hang = 0;
 	g.cycles = 0;
@@ -152,13 +153,25 @@ static void *ticker(void *arg)
 		struct amp_rx_info rx;
 
 		pthread_mutex_lock(&g.fw);
-		if (g.running && !g.hang) {
-			(void)amp_servo_cycle_rx(&g.s, 0, &rx);
-			(void)amp_servo_cycle_tx(&g.s, fb, 4, 0, 0);
-			fw_serve();
-			g.cycles++;
-			if (g.hang_after_attach && g.sets && g.cycles > 30)
-				g.hang = 1;
+		if (g.running && g.attach_retry)
+			g.attach_retry = amp_servo_attach(&g.s, ocm, sizeof(ocm)) != AMP_OK;
+		if (g.running && !g.hang && !g.attach_retry) {
+			int rc = amp_servo_cycle_rx(&g.s, 0, &rx);
+
+			if (rc == AMP_E_STALLED)
+				g.wd_stalls++;
+			if (rc == AMP_E_PEER_ABSENT) {
+				/* closed or re-initialised: attach again (as
+				 * rpu_app's link does, after its safe stop) */
+				g.attach_retry = 1;
+				g.absent++;
+			} else {
+				(void)amp_servo_cycle_tx(&g.s, fb, 4, 0, 0);
+				fw_serve();
+				g.cycles++;
+				if (g.hang_after_attach && g.sets && g.cycles > 30)
+					g.hang = 1;
+			}
 		}
 		pthread_mutex_unlock(&g.fw);
 		count++;

@@ -25,6 +25,9 @@ struct rig {
 	pthread_mutex_t fw;
 	struct amp_servo s;
 	int running, hang, hang_after_attach;
+	int attach_retry;		/* started, its attach refused: tried every cycle */
+	uint32_t wd_stalls;		/* cycles its watchdog said Linux stalled (AMP_E_STALLED) */
+	uint32_t absent;		/* cycles that found the region closed or re-initialised */
 	int attach_in_cycle;		/* a start leaves the attach to the next stalled cycle */
 	atomic_int attach_due;		/* started: the cycle attaches it */
 	atomic_uint attached_in_cycle;
@@ -49,7 +52,8 @@ extern const char TOKEN[33];	/* the telemetry token when rig_up(..., 1) */
 
 void wfile(const char *dir, const char *name, const char *text);
 void rfile(const char *dir, const char *name, char *buf, size_t n);
-/* The firmware attaches (a start) / stops (parked: its line left as it is) / hangs. */
+/* The firmware attaches (a start; refused: tried again every cycle, as
+ * rpu_app's link does) / stops (parked: its line left as it is) / hangs. */
 void fw_start(void);
 void fw_stop(void);
 void fw_hang(void);

@@ -161,6 +161,119 @@ static void test_stop_and_start_between_passes(void)
 	rig_down();
 }
 
+/* The firmware's watchdog stalls plus the cycles that found its region
+ * closed or re-initialised (each a safe stop on the board), and whether its
+ * attach waits, under its lock. */
+static uint32_t fw_wd_stalls(int *attach_waits)
+{
+	uint32_t n;
+
+	pthread_mutex_lock(&g.fw);
+	n = g.wd_stalls + g.absent;
+	*attach_waits = g.attach_retry;
+	pthread_mutex_unlock(&g.fw);
+	return n;
+}
+
+/* `echo stop; echo start` where one pass of servod's saw "offline" (its
+ * session closed) and the start completed before the next. servod closes
+ * its region when the servo stops, so the new firmware waits for a new one
+ * (before: it attached to the old region, where Linux no longer beat, and
+ * its watchdog took it to its safe stop, fault LINUX_STALL, within
+ * wd_limit cycles: on the board about 1 round in 12 at 4 kHz). Here it
+ * runs 40 ms (wd_limit 20 cycles of about 0.5 ms) before servod's pass. */
+static void test_start_before_the_pass_after_the_stop(void)
+{
+	struct timespec ms40 = { 0, 40000000 };
+	uint64_t restores;
+	uint32_t epoch, stalls;
+	int waits;
+
+	printf("servod recovery: a start between the pass that saw offline and the next, five times\n");
+	rig_up(3, 50, 0);
+	for (int round = 0; round < 5; round++) {
+		restores = stat_of(&g.sd->stats.restores);
+		epoch = g.sd->session.epoch;
+		fw_stop_on_request(1);
+		fw_stop();
+		g.power = 0;
+		snprintf(g.kstate, sizeof(g.kstate), "offline");
+		wfile(g.dir, "state", g.kstate);
+		RUN_UNTIL(g.sd->session.state == SESSION_CLOSED, 5);
+		CHECK_EQ(g.sd->session.state, SESSION_CLOSED);
+		stalls = fw_wd_stalls(&waits);
+		g.power = 1;
+		snprintf(g.kstate, sizeof(g.kstate), "running");
+		wfile(g.dir, "state", g.kstate);
+		fw_start();
+		nanosleep(&ms40, 0);
+		CHECK_EQ(fw_wd_stalls(&waits), stalls);
+		CHECK(waits);		/* the closed region refused it */
+		RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1, 10);
+		CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
+		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+		CHECK_EQ(g.sd->session.epoch, epoch + 1u);	/* a new region */
+		CHECK_EQ(fw_wd_stalls(&waits), stalls);
+		CHECK(!waits);
+	}
+	CHECK_EQ(g.reports, 0);
+	CHECK(!latched());
+	rig_down();
+}
+
+/* The same stop and start, but the new firmware attached before servod's
+ * pass reads "offline": remoteproc says "running" only when the driver's
+ * start op returns (the Zynq-7000's driver once it sees the firmware's
+ * RUN!, written just before its first attach). Closing the region then
+ * would take it from under the firmware (its safe stop, LINUX_GONE: 2 of
+ * 150 rounds on the board). A new attach that beats is a start under way:
+ * the session goes on, and the attach gets its parameter set once
+ * remoteproc says "running". The same attach stopped for good, its line
+ * still, is then an offline servo: the session closes. */
+static void test_attached_before_the_pass_that_reads_offline(void)
+{
+	uint64_t restores;
+	uint32_t epoch, stalls;
+	int waits;
+
+	printf("servod recovery: the new firmware attached before the pass that reads offline, five times\n");
+	rig_up(3, 50, 0);
+	for (int round = 0; round < 5; round++) {
+		restores = stat_of(&g.sd->stats.restores);
+		epoch = g.sd->session.epoch;
+		stalls = fw_wd_stalls(&waits);
+		fw_stop_on_request(1);
+		fw_stop();
+		snprintf(g.kstate, sizeof(g.kstate), "offline");
+		wfile(g.dir, "state", g.kstate);
+		fw_start();		/* the driver's start op has not returned */
+		CHECK(!waits);
+		RUN_UNTIL(0, 0.2);	/* passes, remoteproc "offline" */
+		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+		snprintf(g.kstate, sizeof(g.kstate), "running");
+		wfile(g.dir, "state", g.kstate);
+		RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1, 10);
+		CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
+		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
+		CHECK_EQ(g.sd->session.epoch, epoch);	/* the same region */
+		CHECK_EQ(fw_wd_stalls(&waits), stalls);
+		CHECK(!waits);
+	}
+	/* attached, then stopped (no word: powered down) before "running" */
+	fw_stop_on_request(1);
+	fw_stop();
+	snprintf(g.kstate, sizeof(g.kstate), "offline");
+	wfile(g.dir, "state", g.kstate);
+	fw_start();
+	RUN_UNTIL(0, 0.05);
+	fw_stop();
+	RUN_UNTIL(g.sd->session.state == SESSION_CLOSED, 5);
+	CHECK_EQ(g.sd->session.state, SESSION_CLOSED);
+	CHECK_EQ(g.reports, 0);
+	CHECK(!latched());
+	rig_down();
+}
+
 /* The operator stops a firmware servod restarted, once it attached, before
  * its parameter set is loaded: the recovery ends there. */
 static void test_operator_stop_during_recovery(void)
@@ -321,6 +434,8 @@ int main(void)
 	test_operator_stop_is_final();
 	test_operator_stop_during_recovery();
 	test_stop_and_start_between_passes();
+	test_start_before_the_pass_after_the_stop();
+	test_attached_before_the_pass_that_reads_offline();
 	test_driver_without_report_crash();
 	return rig_summary("servod recovery (stop)");
 }
