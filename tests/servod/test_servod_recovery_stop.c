@@ -161,6 +161,13 @@ static void test_stop_and_start_between_passes(void)
 	rig_down();
 }
 
+/* remoteproc's state as the driver sets it (no pass of servod's). */
+static void remoteproc_says(const char *state)
+{
+	snprintf(g.kstate, sizeof(g.kstate), "%s", state);
+	wfile(g.dir, "state", g.kstate);
+}
+
 /* The firmware's watchdog stalls plus the cycles that found its region
  * closed or re-initialised (each a safe stop on the board), and whether its
  * attach waits, under its lock. */
@@ -173,6 +180,18 @@ static uint32_t fw_wd_stalls(int *attach_waits)
 	*attach_waits = g.attach_retry;
 	pthread_mutex_unlock(&g.fw);
 	return n;
+}
+
+/* The operator's stop (with the firmware's word), remoteproc "offline"
+ * (no pass of servod's yet); the restores and the epoch before it. */
+static void stop_round(uint64_t *restores, uint32_t *epoch)
+{
+	*restores = stat_of(&g.sd->stats.restores);
+	*epoch = g.sd->session.epoch;
+	fw_stop_on_request(1);
+	fw_stop();
+	g.power = 0;
+	remoteproc_says("offline");
 }
 
 /* `echo stop; echo start` where one pass of servod's saw "offline" (its
@@ -192,19 +211,12 @@ static void test_start_before_the_pass_after_the_stop(void)
 	printf("servod recovery: a start between the pass that saw offline and the next, five times\n");
 	rig_up(3, 50, 0);
 	for (int round = 0; round < 5; round++) {
-		restores = stat_of(&g.sd->stats.restores);
-		epoch = g.sd->session.epoch;
-		fw_stop_on_request(1);
-		fw_stop();
-		g.power = 0;
-		snprintf(g.kstate, sizeof(g.kstate), "offline");
-		wfile(g.dir, "state", g.kstate);
+		stop_round(&restores, &epoch);
 		RUN_UNTIL(g.sd->session.state == SESSION_CLOSED, 5);
 		CHECK_EQ(g.sd->session.state, SESSION_CLOSED);
 		stalls = fw_wd_stalls(&waits);
 		g.power = 1;
-		snprintf(g.kstate, sizeof(g.kstate), "running");
-		wfile(g.dir, "state", g.kstate);
+		remoteproc_says("running");
 		fw_start();
 		nanosleep(&ms40, 0);
 		CHECK_EQ(fw_wd_stalls(&waits), stalls);
@@ -239,19 +251,15 @@ static void test_attached_before_the_pass_that_reads_offline(void)
 	printf("servod recovery: the new firmware attached before the pass that reads offline, five times\n");
 	rig_up(3, 50, 0);
 	for (int round = 0; round < 5; round++) {
-		restores = stat_of(&g.sd->stats.restores);
-		epoch = g.sd->session.epoch;
 		stalls = fw_wd_stalls(&waits);
-		fw_stop_on_request(1);
-		fw_stop();
-		snprintf(g.kstate, sizeof(g.kstate), "offline");
-		wfile(g.dir, "state", g.kstate);
+		stop_round(&restores, &epoch);
+		g.power = 1;
 		fw_start();		/* the driver's start op has not returned */
+		(void)fw_wd_stalls(&waits);
 		CHECK(!waits);
 		RUN_UNTIL(0, 0.2);	/* passes, remoteproc "offline" */
 		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
-		snprintf(g.kstate, sizeof(g.kstate), "running");
-		wfile(g.dir, "state", g.kstate);
+		remoteproc_says("running");
 		RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1, 10);
 		CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
 		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
@@ -260,10 +268,7 @@ static void test_attached_before_the_pass_that_reads_offline(void)
 		CHECK(!waits);
 	}
 	/* attached, then stopped (no word: powered down) before "running" */
-	fw_stop_on_request(1);
-	fw_stop();
-	snprintf(g.kstate, sizeof(g.kstate), "offline");
-	wfile(g.dir, "state", g.kstate);
+	stop_round(&restores, &epoch);
 	fw_start();
 	RUN_UNTIL(0, 0.05);
 	fw_stop();
