@@ -253,6 +253,7 @@ void co_startup_step(struct co_master *m, struct co_node *n)
 			return;	/* TX full: sent next cycle */
 		n->phase = CO_PH_OPERATIONAL;
 		n->confirmed = 0;	/* by its first TPDO1 or a heartbeat 0x05 */
+		n->hb_confirmed = 0;	/* its heartbeats may predate the start */
 		n->nmt_lost = 0;
 		n->deadline = m->cycle + m->start_timeout_cycles;
 		n->hb_last = m->cycle;

@@ -192,11 +192,16 @@ static void nmt_state_seen(struct co_master *m, struct co_node *n, uint8_t state
 		return;
 	if (state == NMT_ST_OPERATIONAL) {
 		n->confirmed = 1;
+		n->hb_confirmed = 1;
 		return;
 	}
-	/* before the confirmation a heartbeat may still be the one sent
-	 * before the NMT start: the start's own timeout decides */
-	if (n->confirmed)
+	/* Until the node's own heartbeat has said Operational, one may still
+	 * be the one it sent before it handled the NMT start: before the
+	 * confirmation the start's own timeout decides; after a TPDO's (a
+	 * heartbeat loses arbitration to the TPDOs of its SYNC, so it can
+	 * come behind the first one), the node has left only if its TPDO
+	 * fell silent since. */
+	if (n->confirmed && (n->hb_confirmed || n->pdo_silent))
 		left_operational(m, n, state);
 }
 
@@ -236,6 +241,7 @@ static void rx_heartbeat(struct co_master *m, struct co_node *n, const struct ca
 		n->state402 = CO402_UNKNOWN;
 		n->nmt_lost = 0;
 		n->confirmed = 0;
+		n->hb_confirmed = 0;
 		n->reset_active = 0;
 	}
 }

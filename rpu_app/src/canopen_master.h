@@ -44,7 +44,10 @@
  *   - NMT state: a heartbeat saying pre-operational (0x7F) or stopped
  *     (0x04), or an NMT command of another master on the bus sending the
  *     node there: CO_ERR_NMT_PREOP / CO_ERR_NMT_STOPPED in the cycle that
- *     reads it; the node gets NMT start again on the acknowledgement;
+ *     reads it; the node gets NMT start again on the acknowledgement.
+ *     After a start, a heartbeat counts once the node's heartbeat has
+ *     said Operational or its TPDO1 fell silent: before, it may be the one
+ *     sent before the node handled the start, behind its first TPDO1;
  *   - TPDO silence: pdo_timeout_cycles consecutive cycles whose SYNC went
  *     out without the node's TPDO1: CO_ERR_PDO_TIMEOUT (a later heartbeat
  *     timeout or NMT state names the cause: the code is refined);
@@ -164,6 +167,8 @@ struct co_node {
 	uint8_t reset_sent;	/* ... and bit 7 went out after a word with it clear */
 	uint8_t ack_wait;	/* acknowledged before the 402 state was known */
 	uint8_t confirmed;	/* NMT start confirmed (TPDO1 or heartbeat 0x05) */
+	uint8_t hb_confirmed;	/* a heartbeat 0x05 since the NMT start: the
+				 * node's later heartbeats follow the start */
 	uint8_t nmt_lost;	/* left Operational after the start was confirmed */
 	uint8_t pdo_silent;	/* consecutive cycles without TPDO1 */
 	uint8_t start_tries;	/* NMT starts sent again */

@@ -167,6 +167,69 @@ static void test_other_master(void)
 	CHECK_EQ(drv[1].nmt, 5);
 }
 
+/* Cycles after the resume until node idx's NMT start is on the bus. */
+static int cycles_to_nmt_start(struct co_master *m, uint32_t idx, int limit)
+{
+	unsigned starts = drv[idx].nmt_starts;
+
+	for (int c = 1; c <= limit; c++) {
+		enable_all(m, 1);
+		run(m, 1);
+		if (drv[idx].nmt_starts != starts)
+			return c;
+	}
+	return -1;
+}
+
+/* The resume after another master stopped a node: the node's heartbeat
+ * that was due just before it handled the NMT start still says stopped,
+ * and it reaches the master after the node's first TPDO (a heartbeat
+ * loses arbitration to the TPDOs of the same SYNC). That is not the node
+ * leaving Operational again (before: the axis faulted again with 0xff05 at
+ * once and for good, its TPDOs ignored; once in a loaded run on the
+ * ZynqMP board). A node that is stopped again right after its start is
+ * still seen: its TPDO falls silent, and its next heartbeat says why. */
+static void test_stale_heartbeat_after_the_start(void)
+{
+	const uint8_t stopped = 0x04;
+	struct co_master m;
+	uint32_t left;
+	int c;
+
+	bring_up(&m, 2);
+	other_master_nmt(0x02, drv[1].id);
+	CHECK_EQ(cycles_to_fault(&m, 1, 100), 1);
+	left = m.st.nmt_left;
+	resume(&m);
+	c = cycles_to_nmt_start(&m, 1, 100);
+	CHECK(c > 0);
+	q_push(0x700u + drv[1].id, 1, &stopped);	/* behind its TPDO */
+	c = cycles_to_enabled(&m, 100);
+	printf("stale heartbeat after the start: enabled after %d cycles, nmt_left %u -> %u\n", c,
+	       (unsigned)left, (unsigned)m.st.nmt_left);
+	CHECK(c > 0 && c < 20);
+	CHECK_EQ(m.st.nmt_left, left);
+	CHECK_EQ(co_master_node(&m, 1)->fault, 0);
+	/* stopped again, on its own, after its first TPDO and before its
+	 * heartbeat said Operational */
+	other_master_nmt(0x02, drv[1].id);
+	CHECK_EQ(cycles_to_fault(&m, 1, 100), 1);
+	left = m.st.nmt_left;
+	resume(&m);
+	CHECK(cycles_to_nmt_start(&m, 1, 100) > 0);
+	run(&m, 1);		/* its TPDO confirms the start */
+	CHECK(co_master_node(&m, 1)->confirmed);
+	CHECK(!co_master_node(&m, 1)->hb_confirmed);
+	drv[1].nmt = 4;
+	c = cycles_to_fault(&m, 1, 100);
+	run(&m, (int)CFG.hb_producer_ms);	/* its heartbeat says why */
+	printf("stopped right after its start: faulted after %d cycles, error 0x%04x\n", c,
+	       (unsigned)co_master_node(&m, 1)->error_code);
+	CHECK(c > 0 && c <= (int)CFG.hb_producer_ms + 1);
+	CHECK_EQ(co_master_node(&m, 1)->error_code, CO_ERR_NMT_STOPPED);
+	CHECK_EQ(m.st.nmt_left, left + 1);
+}
+
 /* The drive stays Operational and heart-beats, but its TPDO stops: the
  * axis faults in the PDO_TIMEOUT-th cycle without it; one missing TPDO
  * is not a fault (test_canopen_master.c test_pdo_missing). */
@@ -324,6 +387,7 @@ int main(void)
 	test_heartbeat_not_operational(0x04, CO_ERR_NMT_STOPPED);
 	test_preop_between_heartbeats();
 	test_other_master();
+	test_stale_heartbeat_after_the_start();
 	test_tpdo_silence();
 	test_lost_nmt_start();
 	test_cob_id(0x20000181u, 0x201u, CO_CFG_COB_29BIT);
