@@ -56,14 +56,14 @@ enum stall_why {
 
 struct session {
 	enum session_state state;	/* written under sd->lock by the main thread */
-	uint32_t epoch;			/* of the region servod initialised */
+	uint32_t epoch;			/* of the region servod initialised (0: none
+					 * yet; CLOSED with one: servod closed it when
+					 * the servo stopped, close_session()) */
 	uint32_t restored_attach;	/* attach_count whose parameters were loaded */
 	int params_resend;		/* the servo may hold other values than servod's set (params_resend()) */
 	uint32_t resend_tries;		/* failed tries since params_resend was set */
 	uint64_t resend_ns;		/* the last try (mono_now_ns) */
 	int waiting_logged;		/* CLOSED: "waiting until it is offline" said once */
-	int region_closed;		/* CLOSED: servod closed its own region when the
-					 * servo stopped (close_session()) */
 	/* RUNNING, remoteproc "offline": an attach not yet loaded, as last
 	 * seen (supervisor.c, start_under_way()) */
 	uint32_t uw_attach, uw_hb;	/* its attach_count and heartbeat */

@@ -78,10 +78,8 @@ static int close_session(struct servod *sd, enum session_event ev)
 		return 0;
 	}
 	session_event(ss, ev);
-	if (ss->state == SESSION_CLOSED) {
+	if (ss->state == SESSION_CLOSED)
 		amp_linux_close(&sd->amp);
-		ss->region_closed = 1;
-	}
 	pthread_mutex_unlock(&sd->lock);
 	return 1;
 }
@@ -98,7 +96,7 @@ static void open_session(struct servod *sd, const char *rs)
 	struct session *ss = &sd->session;
 	int offline = !strcmp(rs, "offline"), rc;
 
-	if (!offline && !(ss->region_closed && !strcmp(rs, "running"))) {
+	if (!offline && !(ss->epoch && !strcmp(rs, "running"))) {
 		if (!ss->waiting_logged) {
 			logm(sd, "servo %s but not attached to this servod: waiting until it is offline", rs);
 			ss->waiting_logged = 1;
@@ -111,7 +109,6 @@ static void open_session(struct servod *sd, const char *rs)
 		session_event(ss, SEV_REGION_READY);
 		ss->epoch = sd->amp.epoch;
 		ss->restored_attach = 0;
-		ss->region_closed = 0;
 		/* a stall the cycle thread saw in the session before (the
 		 * operator's stop came first) is not the next firmware's */
 		atomic_store(&ss->stall_pending, 0);

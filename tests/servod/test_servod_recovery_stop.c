@@ -171,7 +171,7 @@ static void remoteproc_says(const char *state)
 /* The firmware's watchdog stalls plus the cycles that found its region
  * closed or re-initialised (each a safe stop on the board), and whether its
  * attach waits, under its lock. */
-static uint32_t fw_wd_stalls(int *attach_waits)
+static uint32_t fw_safestop_cycles(int *attach_waits)
 {
 	uint32_t n;
 
@@ -214,18 +214,18 @@ static void test_start_before_the_pass_after_the_stop(void)
 		stop_round(&restores, &epoch);
 		RUN_UNTIL(g.sd->session.state == SESSION_CLOSED, 5);
 		CHECK_EQ(g.sd->session.state, SESSION_CLOSED);
-		stalls = fw_wd_stalls(&waits);
+		stalls = fw_safestop_cycles(&waits);
 		g.power = 1;
 		remoteproc_says("running");
 		fw_start();
 		nanosleep(&ms40, 0);
-		CHECK_EQ(fw_wd_stalls(&waits), stalls);
+		CHECK_EQ(fw_safestop_cycles(&waits), stalls);
 		CHECK(waits);		/* the closed region refused it */
 		RUN_UNTIL(stat_of(&g.sd->stats.restores) == restores + 1, 10);
 		CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
 		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
 		CHECK_EQ(g.sd->session.epoch, epoch + 1u);	/* a new region */
-		CHECK_EQ(fw_wd_stalls(&waits), stalls);
+		CHECK_EQ(fw_safestop_cycles(&waits), stalls);
 		CHECK(!waits);
 	}
 	CHECK_EQ(g.reports, 0);
@@ -251,11 +251,11 @@ static void test_attached_before_the_pass_that_reads_offline(void)
 	printf("servod recovery: the new firmware attached before the pass that reads offline, five times\n");
 	rig_up(3, 50, 0);
 	for (int round = 0; round < 5; round++) {
-		stalls = fw_wd_stalls(&waits);
+		stalls = fw_safestop_cycles(&waits);
 		stop_round(&restores, &epoch);
 		g.power = 1;
 		fw_start();		/* the driver's start op has not returned */
-		(void)fw_wd_stalls(&waits);
+		(void)fw_safestop_cycles(&waits);
 		CHECK(!waits);
 		RUN_UNTIL(0, 0.2);	/* passes, remoteproc "offline" */
 		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
@@ -264,7 +264,7 @@ static void test_attached_before_the_pass_that_reads_offline(void)
 		CHECK_EQ(stat_of(&g.sd->stats.restores), restores + 1);
 		CHECK_EQ(g.sd->session.state, SESSION_RUNNING);
 		CHECK_EQ(g.sd->session.epoch, epoch);	/* the same region */
-		CHECK_EQ(fw_wd_stalls(&waits), stalls);
+		CHECK_EQ(fw_safestop_cycles(&waits), stalls);
 		CHECK(!waits);
 	}
 	/* attached, then stopped (no word: powered down) before "running" */
