@@ -109,6 +109,7 @@ static void open_session(struct servod *sd, const char *rs)
 		session_event(ss, SEV_REGION_READY);
 		ss->epoch = sd->amp.epoch;
 		ss->restored_attach = 0;
+		ss->uw_attach = 0;	/* attach counts start again: none seen */
 		/* a stall the cycle thread saw in the session before (the
 		 * operator's stop came first) is not the next firmware's */
 		atomic_store(&ss->stall_pending, 0);
